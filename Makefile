@@ -1,0 +1,32 @@
+# Two commands do everything on a fresh machine that has python3 and make:
+#   make run    set up .venv, then reproduce the paper (figures, runs, summaries) into out/
+#   make test   set up .venv, then run the test suite
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+OUT    ?= out
+
+.PHONY: run test validate lint bench clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/taichi-ice validate --out $(OUT)/validation
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check taichi_ice tests validation benchmarks
+	$(BIN)/ruff format --check taichi_ice tests validation benchmarks
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/rubble_field.py --out $(OUT)/bench
+
+clean:
+	rm -rf $(VENV) $(OUT) *.egg-info

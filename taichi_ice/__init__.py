@@ -1,0 +1,53 @@
+"""taichi-ice: sea-ice rubble as a 2D discrete element model with friction that remembers.
+
+Convex polygon floes collide through Hopkins (1992) overlap contacts; every contact carries
+the rate-and-state friction law of Lishman et al. (2013), doi:10.1016/j.coldregions.2013.03.004.
+The same Taichi kernels run on the CPU and on a GPU.
+
+    from taichi_ice.friction import RateState
+    mu = RateState().respond(t, v)
+
+    from taichi_ice import load_scenario, Simulation
+    sim = Simulation(load_scenario("scenarios/pillar.toml"), friction=RateState())
+    sim.run(until=20.0, out="runs/pillar_rs.h5")
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from .errors import (
+    CapacityError,
+    DivergenceError,
+    PolygonError,
+    ScenarioError,
+    StabilityError,
+    TaichiIceError,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "CapacityError",
+    "DivergenceError",
+    "PolygonError",
+    "ScenarioError",
+    "Simulation",
+    "StabilityError",
+    "TaichiIceError",
+    "__version__",
+    "load_scenario",
+]
+
+
+def __getattr__(name: str) -> Any:
+    # The engine imports Taichi, which is slow to start: load it only when asked for.
+    if name == "load_scenario":
+        from .scenario import load_scenario
+
+        return load_scenario
+    if name == "Simulation":
+        from .simulation import Simulation
+
+        return Simulation
+    raise AttributeError(f"module 'taichi_ice' has no attribute {name!r}")

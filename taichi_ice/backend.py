@@ -7,7 +7,6 @@ error rather than a silent re-initialisation, which would free every field alrea
 
 from __future__ import annotations
 
-import os
 
 ARCHES = ("cpu", "gpu", "cuda", "vulkan", "metal")
 PRECISIONS = ("f64", "f32")
@@ -49,7 +48,6 @@ def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> 
             f"this process cannot also use arch={arch}, precision={precision}. "
             "Start a new process (or pass reinit=True, which frees every existing field)."
         )
-    os.environ.setdefault("TI_LOG_LEVEL", "warn")
     import taichi as ti
 
     ti.init(

@@ -6,9 +6,10 @@ stored relative to their centroid (``vert_local``) and placed by a position and 
 NumPy functions here are the references that the Taichi kernels are tested against.
 """
 
-from __future__ import annotations
+from typing import NamedTuple
 
 import numpy as np
+import taichi as ti
 
 from .errors import PolygonError
 
@@ -91,7 +92,9 @@ def check_polygon(vertices, what: str = "polygon") -> np.ndarray:
     extent = float(np.max(np.ptp(v, axis=0)))
     area = signed_area(v)
     if extent <= 0.0 or abs(area) <= CONVEXITY_RTOL * extent * extent:
-        raise PolygonError(f"{what}: has zero area; give at least 3 vertices that are not collinear")
+        raise PolygonError(
+            f"{what}: has zero area; give at least 3 vertices that are not collinear"
+        )
     if area < 0.0:
         raise PolygonError(
             f"{what}: vertices are clockwise; list them counter-clockwise (reverse the list)"
@@ -102,7 +105,11 @@ def check_polygon(vertices, what: str = "polygon") -> np.ndarray:
     turns = edges[:, 0] * np.roll(edges[:, 1], -1) - edges[:, 1] * np.roll(edges[:, 0], -1)
     if np.any(turns <= CONVEXITY_RTOL * extent * extent):
         bad = int(np.argmin(turns) + 1) % len(v)
-        kind = "collinear with its neighbours" if abs(turns[bad - 1]) <= CONVEXITY_RTOL * extent * extent else "a reflex (inward) corner"
+        kind = (
+            "collinear with its neighbours"
+            if abs(turns[bad - 1]) <= CONVEXITY_RTOL * extent * extent
+            else "a reflex (inward) corner"
+        )
         raise PolygonError(
             f"{what}: not strictly convex: vertex {bad} {v[bad].tolist()} is {kind}; "
             "floes must be convex polygons (split a concave floe into convex pieces)"
@@ -115,3 +122,542 @@ def transform(vertices: np.ndarray, position, angle: float) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     rot = np.array([[c, -s], [s, c]])
     return np.asarray(vertices, dtype=np.float64) @ rot.T + np.asarray(position, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------------------------
+# Overlap of two convex polygons (Hopkins 1992 contact geometry)
+# ---------------------------------------------------------------------------------------------
+
+# Values of ``Overlap.kind``.
+OVERLAP_NONE = 0  # separated or touching: no contact, every other field is zero
+OVERLAP_CHORD = 1  # the boundaries cross exactly twice: normal and width from that chord
+OVERLAP_FALLBACK = 2  # containment, collinear edges or more than two crossings: SAT axis
+
+
+class Overlap(NamedTuple):
+    """Contact geometry of two overlapping convex polygons ``p`` and ``q``.
+
+    Attributes:
+        area: area of the intersection polygon ``A_ov`` (m^2).
+        centroid: ``(2,)`` centroid of the intersection polygon, the contact point (m).
+        normal: ``(2,)`` unit contact normal, pointing out of ``p`` into ``q``.
+        width: contact width ``L``, the length of the chord between the two points where
+            the boundaries cross (m); see :func:`overlap` for the fallback.
+        kind: ``OVERLAP_NONE``, ``OVERLAP_CHORD`` or ``OVERLAP_FALLBACK``.
+
+    :func:`overlap_batch` returns the same fields as arrays with a leading batch axis.
+    """
+
+    area: float
+    centroid: np.ndarray
+    normal: np.ndarray
+    width: float
+    kind: int
+
+
+def _cross(ax, ay, bx, by):
+    """z component of the 2D cross product (works on scalars and arrays)."""
+    return ax * by - ay * bx
+
+
+def min_penetration_axis(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray]:
+    """Separating-axis query over the edge normals of both convex polygons.
+
+    For an outward unit edge normal ``n`` of ``p`` through vertex ``p_k`` the penetration of
+    ``q`` is ``n . p_k - min_j n . q_j``: how far ``q`` must move along ``n`` to clear that
+    edge's line (likewise for the edges of ``q``, whose normals point from ``q`` to ``p``,
+    so they are negated). The smallest one is the cheapest way to separate the pair.
+
+    Args:
+        p: ``(n, 2)`` counter-clockwise convex polygon (m).
+        q: ``(m, 2)`` counter-clockwise convex polygon (m).
+
+    Returns:
+        ``(depth, axis)``: depth (m) is positive when the polygons overlap and ``<= 0`` when
+        an edge line separates them (then ``-depth`` is the largest gap along an edge
+        normal); ``axis`` is the ``(2,)`` unit normal of that edge, oriented from ``p``
+        toward ``q``. Ties go to the first edge of ``p``, then of ``q``.
+    """
+    p = np.asarray(p, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    best_depth = np.inf
+    best_axis = np.zeros(2)
+    for own, other, sign in ((p, q, 1.0), (q, p, -1.0)):
+        edges = np.roll(own, -1, axis=0) - own
+        # Outward normal of a counter-clockwise edge (ex, ey) is (ey, -ex).
+        normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)
+        normals /= np.hypot(normals[:, 0], normals[:, 1])[:, None]
+        # rel[k, j] = n_k . (other_j - own_k)
+        rel = np.einsum("kd,kjd->kj", normals, other[None, :, :] - own[:, None, :])
+        depths = -rel.min(axis=1)
+        k = int(np.argmin(depths))
+        if depths[k] < best_depth:
+            best_depth = float(depths[k])
+            best_axis = sign * normals[k]
+    return best_depth, best_axis
+
+
+def sat_separated(p: np.ndarray, q: np.ndarray) -> bool:
+    """True when an edge line of ``p`` or ``q`` separates them (touching counts as separated).
+
+    Args:
+        p: ``(n, 2)`` counter-clockwise convex polygon (m).
+        q: ``(m, 2)`` counter-clockwise convex polygon (m).
+    """
+    return min_penetration_axis(p, q)[0] <= 0.0
+
+
+def intersection_polygon(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Intersection of two convex polygons by Sutherland-Hodgman clipping of ``p`` by ``q``.
+
+    A point on an edge line of ``q`` counts as inside, so touching polygons give a
+    degenerate (zero-area) result rather than nothing.
+
+    Args:
+        p: ``(n, 2)`` counter-clockwise convex polygon (m).
+        q: ``(m, 2)`` counter-clockwise convex polygon (m).
+
+    Returns:
+        ``(k, 2)`` counter-clockwise vertices of the intersection, ``k <= n + m``; ``k`` is
+        0 when they do not meet, and fewer than three vertices mean zero area.
+    """
+    poly = [tuple(v) for v in np.asarray(p, dtype=np.float64)]
+    q = np.asarray(q, dtype=np.float64)
+    for e in range(len(q)):
+        if not poly:
+            break
+        cx, cy = q[e]
+        ex, ey = q[(e + 1) % len(q)] - q[e]
+        clipped = []
+        for k in range(len(poly)):
+            ax, ay = poly[k]
+            bx, by = poly[(k + 1) % len(poly)]
+            # Signed distances (times |edge|) of a and b to the left of the clipping edge.
+            sa = _cross(ex, ey, ax - cx, ay - cy)
+            sb = _cross(ex, ey, bx - cx, by - cy)
+            if (sa >= 0.0) != (sb >= 0.0):
+                t = sa / (sa - sb)
+                clipped.append((ax + t * (bx - ax), ay + t * (by - ay)))
+            if sb >= 0.0:
+                clipped.append((bx, by))
+        poly = clipped
+    return np.array(poly, dtype=np.float64).reshape(-1, 2)
+
+
+def _area_centroid(poly: np.ndarray) -> tuple[float, np.ndarray]:
+    """Shoelace area and centroid, as a fan from the first vertex.
+
+    Taking the first vertex as origin keeps the cross products small for a small overlap far
+    from the world origin (the cancellation that matters most in float32).
+    """
+    if len(poly) < 3:
+        return 0.0, np.zeros(2)
+    rel = poly[1:] - poly[0]
+    u, w = rel[:-1], rel[1:]
+    cross = _cross(u[:, 0], u[:, 1], w[:, 0], w[:, 1])
+    twice_area = float(np.sum(cross))
+    if twice_area <= 0.0:
+        return 0.0, np.zeros(2)
+    centroid = poly[0] + np.sum((u + w) * cross[:, None], axis=0) / (3.0 * twice_area)
+    return 0.5 * twice_area, centroid
+
+
+def boundary_crossings(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points where the boundary of ``p`` crosses the boundary of ``q``.
+
+    Edge ``a -> b`` of ``p`` crosses edge ``c -> d`` of ``q`` when ``a`` and ``b`` lie on
+    different sides of line ``cd`` and ``c`` and ``d`` on different sides of line ``ab``,
+    where a point on a line counts as outside (to the right). That rule never divides by
+    zero and counts a crossing through a vertex once; touching and collinear edges are
+    usually not crossings, which sends those cases to the fallback of :func:`overlap`.
+
+    Args:
+        p: ``(n, 2)`` counter-clockwise convex polygon (m).
+        q: ``(m, 2)`` counter-clockwise convex polygon (m).
+
+    Returns:
+        ``(points, entering)``: ``(c, 2)`` crossing points (m), ordered by edge of ``p``
+        then edge of ``q``, and ``(c,)`` bools, True where the boundary of ``p``, walked
+        counter-clockwise, enters ``q``.
+    """
+    p = np.asarray(p, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    a, b = p[:, None, :], np.roll(p, -1, axis=0)[:, None, :]
+    c, d = q[None, :, :], np.roll(q, -1, axis=0)[None, :, :]
+    ab, cd = b - a, d - c
+    sa = _cross(cd[..., 0], cd[..., 1], (a - c)[..., 0], (a - c)[..., 1])
+    sb = _cross(cd[..., 0], cd[..., 1], (b - c)[..., 0], (b - c)[..., 1])
+    tc = _cross(ab[..., 0], ab[..., 1], (c - a)[..., 0], (c - a)[..., 1])
+    td = _cross(ab[..., 0], ab[..., 1], (d - a)[..., 0], (d - a)[..., 1])
+    hit = ((sa > 0.0) != (sb > 0.0)) & ((tc > 0.0) != (td > 0.0))
+    i, j = np.nonzero(hit)
+    t = sa[i, j] / (sa[i, j] - sb[i, j])
+    points = p[i] + t[:, None] * (np.roll(p, -1, axis=0)[i] - p[i])
+    return points, sb[i, j] > 0.0
+
+
+def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
+    """Contact geometry of two convex polygons in the Hopkins (1992) overlap model.
+
+    The intersection polygon (``p`` clipped by ``q``) gives the area ``A_ov`` and the contact
+    point (its centroid). When the two boundaries cross exactly twice, once where the
+    boundary of ``p`` enters ``q`` (``E``) and once where it leaves (``X``), the chord
+    ``X -> E`` is the contact line: the width is its length and the normal its left
+    perpendicular, which points to the side where the boundary of ``p`` lies inside ``q``,
+    i.e. out of ``p`` into ``q``.
+
+    Fallback (``kind == OVERLAP_FALLBACK``) when there are not exactly one entry and one
+    exit: the normal is the separating-axis minimum-penetration axis over both polygons'
+    edge normals (:func:`min_penetration_axis`, oriented ``p -> q``) and the width is the
+    extent of the intersection polygon across that normal. Why this is continuous enough for
+    a DEM force: the area, hence the elastic force ``k_e A_ov``, is continuous through every
+    case; only the direction and the width (which scales the dashpot) can jump when the kind
+    changes, and they jump little where it matters. Touching and collinear edges (measure
+    zero, but met in lattices of equal blocks) are limits of chord contacts whose chord runs
+    corner to corner across a thin overlap of depth ``d`` and width ``w``: its normal differs
+    from the minimum-penetration axis (the face normal) by about ``d / w`` rad and its length
+    from the extent by a fraction ``(d / w)^2 / 2``, both small in the small-overlap regime
+    that a resolved time step keeps. Containment and more than two crossings need overlaps
+    comparable to a block's size or a corner poking through; there the minimum-penetration
+    axis is the direction that separates the pair soonest, the usual choice of polygon DEM
+    and rigid-body codes, and the extent is the width of the overlap that pushes along it.
+
+    Args:
+        p: ``(n, 2)`` counter-clockwise convex polygon in world coordinates (m).
+        q: ``(m, 2)`` counter-clockwise convex polygon in world coordinates (m).
+
+    Returns:
+        An :class:`Overlap`. Separated or touching polygons (SAT depth ``<= 0`` or zero
+        clipped area) give ``kind == OVERLAP_NONE`` with zero area, centroid, normal and
+        width.
+    """
+    p = np.asarray(p, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    none = Overlap(0.0, np.zeros(2), np.zeros(2), 0.0, OVERLAP_NONE)
+    depth, axis = min_penetration_axis(p, q)
+    if depth <= 0.0:
+        return none
+    poly = intersection_polygon(p, q)
+    area, centroid = _area_centroid(poly)
+    if area <= 0.0:
+        return none
+    points, entering = boundary_crossings(p, q)
+    if len(points) == 2 and entering[0] != entering[1]:
+        enter, leave = (points[0], points[1]) if entering[0] else (points[1], points[0])
+        chord = enter - leave
+        width = float(np.hypot(chord[0], chord[1]))
+        if width > 0.0:
+            normal = np.array([-chord[1], chord[0]]) / width
+            return Overlap(area, centroid, normal, width, OVERLAP_CHORD)
+    tangent = np.array([-axis[1], axis[0]])
+    along = poly @ tangent
+    return Overlap(area, centroid, axis, float(along.max() - along.min()), OVERLAP_FALLBACK)
+
+
+# ---------------------------------------------------------------------------------------------
+# Taichi twins, for the contact kernel. Each takes the vertices of two bodies as local
+# matrices ``p`` of static shape (P, 2) and ``q`` of static shape (Q, 2) in world
+# coordinates, of which the first ``n_p`` and ``n_q`` rows are used; no field access, one
+# return statement each (Taichi 1.7 inlines ti.func and allows no early return).
+# ---------------------------------------------------------------------------------------------
+
+
+@ti.func
+def _row(m, k):
+    """Row ``k`` (a dynamic index) of a local ``(n, 2)`` matrix as a 2-vector."""
+    return ti.math.vec2(m[k, 0], m[k, 1])
+
+
+@ti.func
+def _cross_ti(a, b):
+    """z component of the 2D cross product of two 2-vectors."""
+    return a[0] * b[1] - a[1] * b[0]
+
+
+@ti.func
+def min_penetration_axis_ti(p, n_p, q, n_q):
+    """Taichi twin of :func:`min_penetration_axis`.
+
+    Args:
+        p: ``ti.Matrix`` of static shape ``(P, 2)``; rows ``0 .. n_p - 1`` are a
+            counter-clockwise convex polygon (m).
+        n_p: number of vertices of ``p`` (3 <= n_p <= P).
+        q: ``ti.Matrix`` of static shape ``(Q, 2)``, likewise (m).
+        n_q: number of vertices of ``q`` (3 <= n_q <= Q).
+
+    Returns:
+        ``(depth, axis)``: depth (m), positive when overlapping, ``<= 0`` when separated;
+        axis a unit 2-vector from ``p`` toward ``q``.
+    """
+    depth = 0.0
+    axis = ti.math.vec2(0.0, 0.0)
+    for k in range(n_p):
+        a = _row(p, k)
+        e = _row(p, (k + 1) % n_p) - a
+        n = ti.math.vec2(e[1], -e[0]).normalized()
+        lowest = ti.math.dot(n, _row(q, 0) - a)
+        for j in range(1, n_q):
+            lowest = ti.min(lowest, ti.math.dot(n, _row(q, j) - a))
+        if k == 0 or -lowest < depth:
+            depth = -lowest
+            axis = n
+    for k in range(n_q):
+        a = _row(q, k)
+        e = _row(q, (k + 1) % n_q) - a
+        n = ti.math.vec2(e[1], -e[0]).normalized()
+        lowest = ti.math.dot(n, _row(p, 0) - a)
+        for j in range(1, n_p):
+            lowest = ti.min(lowest, ti.math.dot(n, _row(p, j) - a))
+        if -lowest < depth:
+            depth = -lowest
+            axis = -n
+    return depth, axis
+
+
+@ti.func
+def sat_separated_ti(p, n_p, q, n_q):
+    """Taichi twin of :func:`sat_separated`: True (1) when an edge line separates p and q.
+
+    Same arguments as :func:`min_penetration_axis_ti`; use it to reject a candidate pair
+    before :func:`overlap_ti` (which runs the same test first).
+    """
+    depth, _axis = min_penetration_axis_ti(p, n_p, q, n_q)
+    return depth <= 0.0
+
+
+@ti.func
+def _clip_ti(p, n_p, q, n_q):
+    """Sutherland-Hodgman clipping of ``p`` by ``q`` (see :func:`intersection_polygon`).
+
+    Returns:
+        ``(buf, start, count)``: ``buf`` is a ``(2 (P + Q), 2)`` local matrix holding the
+        intersection in rows ``start .. start + count - 1``. Clipping a convex polygon by a
+        half-plane adds at most one vertex, so ``P + Q`` rows suffice; the two halves of
+        ``buf`` are the ping-pong buffers of successive clips. Writes past ``P + Q`` (only
+        possible through round-off on near-degenerate input) are dropped.
+    """
+    cap = ti.static(p.n + q.n)
+    buf = ti.Matrix.zero(float, 2 * cap, 2)
+    for k in range(n_p):
+        buf[k, 0] = p[k, 0]
+        buf[k, 1] = p[k, 1]
+    src = 0
+    count = n_p
+    for e in range(n_q):
+        c = _row(q, e)
+        edge = _row(q, (e + 1) % n_q) - c
+        dst = cap - src
+        out = 0
+        for k in range(count):
+            a = _row(buf, src + k)
+            b = _row(buf, src + (k + 1) % count)
+            sa = _cross_ti(edge, a - c)
+            sb = _cross_ti(edge, b - c)
+            if (sa >= 0.0) != (sb >= 0.0):
+                x = a + (sa / (sa - sb)) * (b - a)
+                if out < cap:
+                    buf[dst + out, 0] = x[0]
+                    buf[dst + out, 1] = x[1]
+                out += 1
+            if sb >= 0.0:
+                if out < cap:
+                    buf[dst + out, 0] = b[0]
+                    buf[dst + out, 1] = b[1]
+                out += 1
+        src = dst
+        count = ti.min(out, cap)
+    return buf, src, count
+
+
+@ti.func
+def overlap_ti(p, n_p, q, n_q):
+    """Taichi twin of :func:`overlap`: contact geometry of two convex polygons.
+
+    The contact kernel gathers the world-coordinate vertices of bodies i and j into local
+    matrices (e.g. ``ti.Matrix.zero(float, MAXV, 2)`` filled row by row) and calls this.
+    Shift both by a common nearby origin (e.g. body i's position) before the call when
+    running in float32: the clip and the area lose digits in proportion to the size of the
+    coordinates, not of the overlap.
+
+    Args:
+        p: ``ti.Matrix`` of static shape ``(P, 2)``; rows ``0 .. n_p - 1`` are a
+            counter-clockwise convex polygon (m).
+        n_p: number of vertices of ``p`` (3 <= n_p <= P).
+        q: ``ti.Matrix`` of static shape ``(Q, 2)``, likewise (m).
+        n_q: number of vertices of ``q`` (3 <= n_q <= Q).
+
+    Returns:
+        ``(area, centroid, normal, width, kind)``: area (m^2), centroid (2-vector, m),
+        unit normal from ``p`` into ``q`` (2-vector), contact width (m) and kind
+        (``OVERLAP_NONE``, ``OVERLAP_CHORD`` or ``OVERLAP_FALLBACK``), as in :class:`Overlap`;
+        all zero for a separated pair.
+    """
+    area = 0.0
+    centroid = ti.math.vec2(0.0, 0.0)
+    normal = ti.math.vec2(0.0, 0.0)
+    width = 0.0
+    kind = OVERLAP_NONE
+    depth, axis = min_penetration_axis_ti(p, n_p, q, n_q)
+    if depth > 0.0:
+        buf, start, count = _clip_ti(p, n_p, q, n_q)
+        # Fan from the first vertex, as _area_centroid does.
+        origin = _row(buf, start)
+        twice_area = 0.0
+        moment = ti.math.vec2(0.0, 0.0)
+        for k in range(1, count - 1):
+            u = _row(buf, start + k) - origin
+            w = _row(buf, start + k + 1) - origin
+            cr = _cross_ti(u, w)
+            twice_area += cr
+            moment += (u + w) * cr
+        if twice_area > 0.0:
+            area = 0.5 * twice_area
+            centroid = origin + moment / (3.0 * twice_area)
+            # Boundary crossings, by the rule of boundary_crossings(): keep the first two.
+            crossings = 0
+            entering_count = 0
+            enter = ti.math.vec2(0.0, 0.0)
+            leave = ti.math.vec2(0.0, 0.0)
+            for i in range(n_p):
+                a = _row(p, i)
+                ab = _row(p, (i + 1) % n_p) - a
+                for j in range(n_q):
+                    c = _row(q, j)
+                    cd = _row(q, (j + 1) % n_q) - c
+                    sa = _cross_ti(cd, a - c)
+                    sb = _cross_ti(cd, a + ab - c)
+                    tc = _cross_ti(ab, c - a)
+                    td = _cross_ti(ab, c + cd - a)
+                    if ((sa > 0.0) != (sb > 0.0)) and ((tc > 0.0) != (td > 0.0)):
+                        x = a + (sa / (sa - sb)) * ab
+                        if sb > 0.0:
+                            entering_count += 1
+                            enter = x
+                        else:
+                            leave = x
+                        crossings += 1
+            chord = enter - leave
+            chord_length = chord.norm()
+            if crossings == 2 and entering_count == 1 and chord_length > 0.0:
+                kind = OVERLAP_CHORD
+                width = chord_length
+                normal = ti.math.vec2(-chord[1], chord[0]) / chord_length
+            else:
+                kind = OVERLAP_FALLBACK
+                normal = axis
+                tangent = ti.math.vec2(-axis[1], axis[0])
+                lo = ti.math.dot(tangent, origin)
+                hi = lo
+                for k in range(1, count):
+                    s = ti.math.dot(tangent, _row(buf, start + k))
+                    lo = ti.min(lo, s)
+                    hi = ti.max(hi, s)
+                width = hi - lo
+    return area, centroid, normal, width, kind
+
+
+@ti.kernel
+def _overlap_batch_kernel(
+    # In:
+    p_in: ti.types.ndarray(ndim=3),
+    n_p_in: ti.types.ndarray(ndim=1),
+    q_in: ti.types.ndarray(ndim=3),
+    n_q_in: ti.types.ndarray(ndim=1),
+    maxv_p: ti.template(),
+    maxv_q: ti.template(),
+    # Out:
+    area_out: ti.types.ndarray(ndim=1),
+    centroid_out: ti.types.ndarray(ndim=2),
+    normal_out: ti.types.ndarray(ndim=2),
+    width_out: ti.types.ndarray(ndim=1),
+    kind_out: ti.types.ndarray(ndim=1),
+    depth_out: ti.types.ndarray(ndim=1),
+    axis_out: ti.types.ndarray(ndim=2),
+    separated_out: ti.types.ndarray(ndim=1),
+):
+    for b in range(area_out.shape[0]):
+        # The gather the contact kernel does: vertices into fixed-size local matrices.
+        p = ti.Matrix.zero(float, maxv_p, 2)
+        q = ti.Matrix.zero(float, maxv_q, 2)
+        for k in range(n_p_in[b]):
+            p[k, 0] = p_in[b, k, 0]
+            p[k, 1] = p_in[b, k, 1]
+        for k in range(n_q_in[b]):
+            q[k, 0] = q_in[b, k, 0]
+            q[k, 1] = q_in[b, k, 1]
+        area, centroid, normal, width, kind = overlap_ti(p, n_p_in[b], q, n_q_in[b])
+        depth, axis = min_penetration_axis_ti(p, n_p_in[b], q, n_q_in[b])
+        area_out[b] = area
+        width_out[b] = width
+        kind_out[b] = kind
+        depth_out[b] = depth
+        separated_out[b] = ti.cast(sat_separated_ti(p, n_p_in[b], q, n_q_in[b]), ti.i32)
+        for d in ti.static(range(2)):
+            centroid_out[b, d] = centroid[d]
+            normal_out[b, d] = normal[d]
+            axis_out[b, d] = axis[d]
+
+
+class BatchOverlap(NamedTuple):
+    """Results of :func:`overlap_batch` for B pairs: the :class:`Overlap` fields, batched.
+
+    Attributes:
+        area: ``(B,)`` m^2. centroid: ``(B, 2)`` m. normal: ``(B, 2)``. width: ``(B,)`` m.
+        kind: ``(B,)`` int32. depth: ``(B,)`` SAT minimum penetration (m). axis: ``(B, 2)``
+        its unit axis, ``p -> q``. separated: ``(B,)`` bool, the SAT verdict.
+    """
+
+    area: np.ndarray
+    centroid: np.ndarray
+    normal: np.ndarray
+    width: np.ndarray
+    kind: np.ndarray
+    depth: np.ndarray
+    axis: np.ndarray
+    separated: np.ndarray
+
+
+def overlap_batch(p, n_p, q, n_q) -> BatchOverlap:
+    """Run :func:`overlap_ti` (and the SAT functions) on B pairs at once, for tests and benchmarks.
+
+    Starts Taichi on the CPU in float64 if nothing has started it yet; otherwise runs on the
+    arch and precision already chosen, with inputs cast to that precision.
+
+    Args:
+        p: ``(B, P, 2)`` vertices of the first polygons (m), rows past ``n_p[b]`` ignored.
+        n_p: ``(B,)`` vertex counts of ``p`` (3 <= n_p <= P).
+        q: ``(B, Q, 2)`` vertices of the second polygons (m).
+        n_q: ``(B,)`` vertex counts of ``q`` (3 <= n_q <= Q).
+
+    Returns:
+        A :class:`BatchOverlap` of NumPy arrays.
+    """
+    from . import backend
+
+    if backend.current() is None:
+        backend.init()
+    real = backend.real_dtype(backend.current()[1])
+    p = np.ascontiguousarray(p, dtype=real)
+    q = np.ascontiguousarray(q, dtype=real)
+    n_p = np.ascontiguousarray(n_p, dtype=np.int32)
+    n_q = np.ascontiguousarray(n_q, dtype=np.int32)
+    batch = p.shape[0]
+    if p.ndim != 3 or q.ndim != 3 or p.shape[2] != 2 or q.shape[2] != 2:
+        raise ValueError(f"p and q must be (B, MAXV, 2) arrays, got {p.shape} and {q.shape}")
+    if q.shape[0] != batch or n_p.shape != (batch,) or n_q.shape != (batch,):
+        raise ValueError("p, n_p, q and n_q must have the same batch length B")
+    if np.any(n_p < 3) or np.any(n_p > p.shape[1]) or np.any(n_q < 3) or np.any(n_q > q.shape[1]):
+        raise ValueError("vertex counts must lie between 3 and the padded size of p and q")
+    out = BatchOverlap(
+        area=np.zeros(batch, real),
+        centroid=np.zeros((batch, 2), real),
+        normal=np.zeros((batch, 2), real),
+        width=np.zeros(batch, real),
+        kind=np.zeros(batch, np.int32),
+        depth=np.zeros(batch, real),
+        axis=np.zeros((batch, 2), real),
+        separated=np.zeros(batch, np.int32),
+    )
+    if batch:
+        _overlap_batch_kernel(p, n_p, q, n_q, p.shape[1], q.shape[1], *out)
+    return out._replace(separated=out.separated.astype(bool))

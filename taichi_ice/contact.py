@@ -1,0 +1,278 @@
+"""Narrow phase and contact forces (Hopkins 1992), with per-contact memory.
+
+For every candidate pair the owner body's thread clips the two outlines
+(``geometry.overlap_ti``) and applies:
+
+- normal force  ``F_n = k_e A + k_v L v_n``, no tension (``F_n >= 0``); ``A`` the overlap
+  area, ``L`` the contact width (chord), ``v_n`` the approach speed along the normal;
+- tangential force from a stick spring ``k_t`` and dashpot ``c_t`` on the tangential stretch
+  ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979): beyond the cap the contact slips,
+  ``xi`` is pulled back to the cap and the slip distance times the cap is frictional work;
+- ``mu`` from the batch's law: Coulomb, or rate-and-state with ``theta`` carried by the
+  contact, started in equilibrium at its first slip rate and advanced with
+  ``friction.theta_step`` (Lishman et al. 2013).
+
+Ownership: each pair is handled once, by a dynamic body if exactly one is dynamic, else by
+the lower id; small-large pairs by the small body. The owner keeps the contact's memory
+(partner, ``xi``, ``theta``, last area, stored elastic energy) in one of its K slots; a pair
+that no longer overlaps is not written again, so its memory is dropped. More than K contacts
+raise the overflow status, which the simulation turns into an error.
+
+Forces are gathered in 64-bit fixed point (``state.FORCE_QUANTUM``), so a run is bit-for-bit
+reproducible on any number of threads and in any batch.
+
+Energy: friction (slip), viscous (dashpots) go to the owner's ``body_energy`` row; the
+normal elastic energy of a contact is ``integral k_e A dA / L`` (exact for translation along
+the normal, where ``dA = L d(depth)``), accumulated from successive overlap areas.
+"""
+
+# No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+
+import taichi as ti
+
+from .broadphase import bucket_of
+from .friction import METHOD_EXPONENTIAL, rate_state_mu, slip_log, theta_equilibrium, theta_step
+from .geometry import overlap_ti
+from .state import (
+    BODY_FRICTION,
+    BODY_VISCOUS,
+    FORCE_QUANTUM,
+    KIND_DYNAMIC,
+    STATUS_SLOT_OVERFLOW,
+    Data,
+    Layout,
+    Model,
+)
+
+
+
+@ti.func
+def cross2(a, b):
+    """z-component of the cross product of two 2-vectors."""
+    return a[0] * b[1] - a[1] * b[0]
+
+
+@ti.func
+def perp(omega, r):
+    """omega (z) x r: the velocity of a point at r on a body spinning at omega."""
+    return ti.Vector([-omega * r[1], omega * r[0]])
+
+
+@ti.func
+def normal_force(area, width, approach_speed, k_e, k_v):
+    """Hopkins normal force (N): elastic on the overlap area, viscous on the contact width.
+
+    Returns the force, clamped at zero (no tension), and its elastic part.
+    """
+    elastic = k_e * area
+    return ti.max(elastic + k_v * width * approach_speed, 0.0), elastic
+
+
+@ti.func
+def tangential_force(xi, slip_speed, dt, k_t, c_t, cap):
+    """Stick spring-dashpot capped at ``cap`` = mu F_n (Cundall and Strack 1979).
+
+    Args:
+        xi: tangential stretch carried from the last step (m).
+        slip_speed: tangential velocity of the partner relative to the owner (m/s).
+        dt: time step (s). k_t: spring (N/m). c_t: dashpot (N s/m). cap: mu F_n (N).
+
+    Returns:
+        (force on the partner along the tangent (N), new stretch (m),
+         frictional work of this step (J), dashpot work of this step (J)).
+    """
+    trial = xi + slip_speed * dt
+    force = -k_t * trial - c_t * slip_speed
+    slip_work = 0.0
+    damp_work = c_t * slip_speed * slip_speed * dt
+    new_xi = trial
+    if ti.abs(force) > cap:
+        # Slip: the spring holds exactly the cap; the rest of the displacement is sliding.
+        force = ti.math.sign(force) * cap
+        new_xi = -force / k_t
+        slip_work = cap * ti.abs(trial - new_xi)
+        damp_work = 0.0
+    return force, new_xi, slip_work, damp_work
+
+
+@ti.data_oriented
+class ContactStage:
+    """Finds overlapping pairs, applies contact forces and keeps contact memory."""
+
+    def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash, params: dict):
+        """
+        Args:
+            params: ``k_e`` (N/m^2), ``k_v`` (Pa s), ``k_t`` (N/m), ``c_t`` (N s/m),
+                ``method`` (friction.METHOD_* for theta).
+        """
+        self.layout, self.model, self.data, self.hash = layout, model, data, spatial_hash
+        self.k_e = float(params["k_e"])
+        self.k_v = float(params["k_v"])
+        self.k_t = float(params["k_t"])
+        self.c_t = float(params["c_t"])
+        self.method = int(params.get("method", METHOD_EXPONENTIAL))
+        self.maxv = layout.max_verts
+        # Bodies whose bounding circles meet a body's: more than its slots are possible
+        # (near misses), so the candidate list is twice as long.
+        self.n_cand = 2 * layout.slots
+
+    @ti.func
+    def outline(self, i):
+        """World coordinates of body i's outline in a (MAXV, 2) matrix, and its count."""
+        m, d = ti.static((self.model, self.data))
+        p = ti.Matrix.zero(self.layout.real, self.maxv, 2)
+        c, s = ti.cos(d.body_angle[i]), ti.sin(d.body_angle[i])
+        x = d.body_pos[i]
+        start, count = m.body_vert_start[i], m.body_vert_count[i]
+        for k in range(count):
+            v = m.vert_local[start + k]
+            p[k, 0] = x[0] + c * v[0] - s * v[1]
+            p[k, 1] = x[1] + s * v[0] + c * v[1]
+        return p, count
+
+    @ti.func
+    def add_force(self, i, force, torque):
+        d, q = ti.static((self.data, 1.0 / FORCE_QUANTUM))
+        ti.atomic_add(d.body_force_q[i][0], ti.cast(force[0] * q, ti.i64))
+        ti.atomic_add(d.body_force_q[i][1], ti.cast(force[1] * q, ti.i64))
+        ti.atomic_add(d.body_torque_q[i], ti.cast(torque * q, ti.i64))
+
+    @ti.func
+    def pair(self, i, j, cur, used, dt):
+        """Contact between owner i and partner j; returns the owner's new slot count."""
+        m, d = ti.static((self.model, self.data))
+        nxt = 1 - cur
+        xi_, xj_ = d.body_pos[i], d.body_pos[j]
+        if True:
+            p, n_p = self.outline(i)
+            q, n_q = self.outline(j)
+            area, point, normal, width, kind = overlap_ti(p, n_p, q, n_q)
+            if area > 0.0:
+                # Memory of this pair from the last step, if it was in contact then.
+                found = -1
+                for s in range(d.contact_count[cur, i]):
+                    if d.contact_partner[cur, i, s] == j:
+                        found = s
+                xi = 0.0
+                area_prev = 0.0
+                elastic = 0.0
+                if found >= 0:
+                    xi = d.contact_xi[cur, i, found]
+                    area_prev = d.contact_area[cur, i, found]
+                    elastic = d.contact_elastic[cur, i, found]
+                r_i, r_j = point - xi_, point - xj_
+                v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
+                    d.body_vel[i] + perp(d.body_omega[i], r_i)
+                )
+                tangent = ti.Vector([-normal[1], normal[0]])
+                approach = -v_rel.dot(normal)
+                slip = v_rel.dot(tangent)
+                f_n, f_el = normal_force(area, width, approach, self.k_e, self.k_v)
+
+                mu = 0.0
+                theta_new = 0.0
+                w = m.body_world[i]
+                if ti.static(self.layout.rate_state):
+                    a_, b_, mu0 = (
+                        m.world_rate_state[w, 0],
+                        m.world_rate_state[w, 1],
+                        m.world_rate_state[w, 2],
+                    )
+                    v_star, t_c = m.world_rate_state[w, 3], m.world_rate_state[w, 4]
+                    x = slip_log(ti.abs(slip), v_star)
+                    theta = theta_equilibrium(x, b_)
+                    if found >= 0:
+                        theta = d.contact_theta[cur, i, found]
+                    mu = rate_state_mu(theta, x, a_, mu0)
+                    theta_new = theta_step(theta, x, x, x, dt, b_, t_c, ti.static(self.method))
+                else:
+                    mu = m.world_mu[w]
+
+                f_t, xi_new, slip_work, damp_work = tangential_force(
+                    xi, slip, dt, self.k_t, self.c_t, mu * f_n
+                )
+                force = f_n * normal + f_t * tangent  # on j; -force on i
+                self.add_force(j, force, cross2(r_j, force))
+                self.add_force(i, -force, -cross2(r_i, force))
+
+                # Elastic energy stored in the overlap: integral of k_e A dA / L.
+                elastic += self.k_e * 0.5 * (area + area_prev) * (area - area_prev) / ti.max(width, 1e-9)
+                d.body_energy[i, BODY_FRICTION] += slip_work
+                d.body_energy[i, BODY_VISCOUS] += (f_n - f_el) * approach * dt + damp_work
+
+                if used < self.layout.slots:
+                    d.contact_partner[nxt, i, used] = j
+                    d.contact_xi[nxt, i, used] = xi_new
+                    d.contact_area[nxt, i, used] = area
+                    d.contact_elastic[nxt, i, used] = elastic
+                    if ti.static(self.layout.rate_state):
+                        d.contact_theta[nxt, i, used] = theta_new
+                used += 1
+        return used
+
+    @ti.func
+    def owns(self, i, j):
+        """True if body i handles the pair (i, j) found from both sides in the hash."""
+        kind = ti.static(self.model.body_kind)
+        dyn_i, dyn_j = kind[i] == KIND_DYNAMIC, kind[j] == KIND_DYNAMIC
+        return (dyn_i and not dyn_j) or (dyn_i == dyn_j and dyn_i and i < j)
+
+    @ti.func
+    def near(self, i, j):
+        """Bounding circles of bodies i and j overlap."""
+        m, d = ti.static((self.model, self.data))
+        reach = m.body_radius[i] + m.body_radius[j]
+        return (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach
+
+    @ti.kernel
+    def compute(self, cur: ti.i32):
+        """Forces of every contact of the step; memory read from buffer cur, written to 1-cur."""
+        m, d, h = ti.static((self.model, self.data, self.hash))
+        nxt = 1 - cur
+        dt = d.time_step[None]
+        for i in range(self.layout.n_bodies):
+            # Gather the partners first, then handle them in one loop: the narrow phase is
+            # inlined once, which keeps the kernel's compile time short.
+            cand = ti.Vector.zero(ti.i32, self.n_cand)
+            n = 0
+            w = m.body_world[i]
+            dyn_i = m.body_kind[i] == KIND_DYNAMIC
+            if m.body_small[i] and dyn_i:
+                c = h.body_cell[i]
+                for nb in range(9):
+                    cell = c + ti.Vector([nb % 3 - 1, nb // 3 - 1])
+                    b = bucket_of(cell, w, h.mask)
+                    for e in range(h.bucket_start[b], h.bucket_start[b] + h.bucket_count[b]):
+                        j = h.sorted_ids[e]
+                        # A bucket may hold other cells or worlds: keep only this cell.
+                        if (
+                            j != i
+                            and m.body_world[j] == w
+                            and h.body_cell[j][0] == cell[0]
+                            and h.body_cell[j][1] == cell[1]
+                            and self.owns(i, j)
+                            and self.near(i, j)
+                        ):
+                            if n < self.n_cand:
+                                cand[n] = j
+                            n += 1
+            for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
+                j = m.large_ids[g]
+                dyn_j = m.body_kind[j] == KIND_DYNAMIC
+                # Small dynamic bodies own their contacts with large ones; a small fixed or
+                # kinematic body (a pillar) those with large dynamic bodies; large bodies
+                # among themselves the lower id, if either moves freely.
+                keep = False
+                if m.body_small[i]:
+                    keep = dyn_i or dyn_j
+                else:
+                    keep = j > i and (dyn_i or dyn_j)
+                if keep and self.near(i, j):
+                    if n < self.n_cand:
+                        cand[n] = j
+                    n += 1
+            used = 0
+            for k in range(ti.min(n, self.n_cand)):
+                used = self.pair(i, cand[k], cur, used, dt)
+            d.contact_count[nxt, i] = ti.min(used, self.layout.slots)
+            ti.atomic_max(d.status[STATUS_SLOT_OVERFLOW], ti.max(used, n - self.n_cand + self.layout.slots))

@@ -1,0 +1,453 @@
+"""Polygon geometry: overlap, clipping, SAT and mass properties against shapely and symmetry.
+
+Shapely (GEOS) is the independent reference: it shares no code with ``taichi_ice.geometry``.
+The Taichi functions are held against the NumPy reference on the same seeded random pairs.
+"""
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import MultiPoint, Point, Polygon
+
+from taichi_ice.errors import PolygonError
+from taichi_ice.geometry import (
+    OVERLAP_CHORD,
+    OVERLAP_FALLBACK,
+    OVERLAP_NONE,
+    check_polygon,
+    diamond,
+    intersection_polygon,
+    mass_properties,
+    min_penetration_axis,
+    overlap,
+    overlap_batch,
+    rectangle,
+    sat_separated,
+    transform,
+)
+
+N_PAIRS = 3000  # seeded random pairs; about two thirds overlap
+MAXV = 8  # largest random polygon, and the padded size handed to the Taichi kernel
+SEED = 20240611
+
+# Shapely works with its own vertex order and arithmetic, so the two agree to round-off
+# relative to the polygon size (areas ~1 m^2, coordinates ~5 m): 1e-10 leaves two orders of
+# magnitude over the largest error seen (~1e-13), while any real mistake is O(1).
+SHAPELY_RTOL = 1e-10
+# Identical formulas evaluated in a different order (Taichi/LLVM vs NumPy): a few ulps of the
+# coordinates, amplified by at most the conditioning of a chord crossing.
+TI_RTOL_F64 = 1e-12
+# float32 inputs are rounded before both computations; what is left is f32 round-off in the
+# clip and the fan sums, relative to coordinates ~5 m.
+TI_RTOL_F32 = 2e-4
+# A pair whose SAT depth is this close to zero (relative to its size) is touching within
+# round-off: shapely may call it intersecting with zero area; SAT need not agree there.
+TOUCH_RTOL = 1e-12
+
+
+def random_convex(rng: np.random.Generator, centre: np.ndarray) -> np.ndarray:
+    """A strictly convex CCW polygon of 3..MAXV vertices on a random rotated ellipse (m)."""
+    n = int(rng.integers(3, MAXV + 1))
+    while True:
+        angles = np.sort(rng.uniform(0.0, 2.0 * np.pi, n))
+        gaps = np.diff(np.append(angles, angles[0] + 2.0 * np.pi))
+        # Gaps wide enough that no vertex is nearly collinear (check_polygon would refuse it).
+        if gaps.min() > 0.2:
+            break
+    semi = rng.uniform(0.3, 1.5, 2)
+    local = np.stack([semi[0] * np.cos(angles), semi[1] * np.sin(angles)], axis=1)
+    return check_polygon(transform(local, centre, rng.uniform(0.0, 2.0 * np.pi)))
+
+
+def _pad(polys: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Stack polygons into a zero-padded ``(B, MAXV, 2)`` array and their ``(B,)`` counts."""
+    out = np.zeros((len(polys), MAXV, 2))
+    for b, v in enumerate(polys):
+        out[b, : len(v)] = v
+    return out, np.array([len(v) for v in polys])
+
+
+@pytest.fixture(scope="module")
+def pairs() -> list[tuple[np.ndarray, np.ndarray]]:
+    """Seeded random convex pairs around (3, -2) m, overlapping or not."""
+    rng = np.random.default_rng(SEED)
+    out = []
+    for _ in range(N_PAIRS):
+        c = np.array([3.0, -2.0]) + rng.uniform(-1.0, 1.0, 2)
+        offset = rng.uniform(0.0, 2.5) * np.array([np.cos(a := rng.uniform(0, 7)), np.sin(a)])
+        out.append((random_convex(rng, c), random_convex(rng, c + offset)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def reference(pairs):
+    """NumPy overlap and shapely's intersection for every pair."""
+    ours = [overlap(p, q) for p, q in pairs]
+    theirs = [Polygon(p).intersection(Polygon(q)) for p, q in pairs]
+    return ours, theirs
+
+
+@pytest.fixture(scope="module")
+def batch(pairs, taichi_runtime):
+    """Taichi overlap_batch on every pair, and the inputs rounded to its precision."""
+    real = np.float64 if taichi_runtime[1] == "f64" else np.float32
+    p, n_p = _pad([p for p, _ in pairs])
+    q, n_q = _pad([q for _, q in pairs])
+    p, q = p.astype(real), q.astype(real)
+    rounded = [(p[b, : n_p[b]].astype(float), q[b, : n_q[b]].astype(float)) for b in range(len(p))]
+    return overlap_batch(p, n_p, q, n_q), rounded
+
+
+def _ti_rtol(taichi_runtime) -> float:
+    return TI_RTOL_F64 if taichi_runtime[1] == "f64" else TI_RTOL_F32
+
+
+def _assert_area_centroid(label, areas, centroids, pairs, shapes, rtol):
+    """Area and first moment (area * centroid) against shapely, relative to the pair's size."""
+    worst_area = worst_moment = 0.0
+    for area, centroid, (p, q), ref in zip(areas, centroids, pairs, shapes, strict=True):
+        scale = min(mass_properties(p)[0], mass_properties(q)[0])
+        err_area = abs(area - ref.area) / scale
+        # The centroid of a sliver is ill-conditioned; its first moment is not.
+        ref_c = np.array(ref.centroid.coords[0]) if ref.area > 0 else np.zeros(2)
+        err_moment = np.max(np.abs(area * np.asarray(centroid) - ref.area * ref_c))
+        err_moment /= scale * np.sqrt(scale)
+        worst_area, worst_moment = max(worst_area, err_area), max(worst_moment, err_moment)
+    print(f"{label}: max area error {worst_area:.2e}, max moment error {worst_moment:.2e} (rel)")
+    assert worst_area < rtol
+    assert worst_moment < rtol
+
+
+def test_numpy_overlap_area_and_centroid_match_shapely(pairs, reference):
+    """The clipped area and contact point equal shapely's intersection on random pairs."""
+    ours, theirs = reference
+    assert sum(o.area > 0 for o in ours) > N_PAIRS // 2
+    _assert_area_centroid(
+        "numpy",
+        [o.area for o in ours],
+        [o.centroid for o in ours],
+        pairs,
+        theirs,
+        SHAPELY_RTOL,
+    )
+
+
+def test_intersection_polygon_matches_shapely(pairs, reference):
+    """The clipped polygon covers exactly shapely's intersection (symmetric difference ~ 0)."""
+    worst = 0.0
+    for (p, q), ref in zip(pairs[:500], reference[1][:500], strict=True):
+        clipped = intersection_polygon(p, q)
+        if len(clipped) < 3 or ref.area == 0.0:
+            continue
+        ours = Polygon(clipped)
+        worst = max(worst, ours.symmetric_difference(ref).area / ref.area)
+    print(f"intersection_polygon: max symmetric difference {worst:.2e} of the area")
+    assert worst < 1e-8
+
+
+def test_taichi_overlap_area_and_centroid_match_shapely(batch, taichi_runtime):
+    """overlap_ti's area and contact point equal shapely's intersection on random pairs."""
+    result, rounded = batch
+    shapes = [Polygon(p).intersection(Polygon(q)) for p, q in rounded]
+    rtol = max(SHAPELY_RTOL, _ti_rtol(taichi_runtime))
+    _assert_area_centroid("taichi", result.area, result.centroid, rounded, shapes, rtol)
+
+
+def _shapely_crossings(p: np.ndarray, q: np.ndarray) -> np.ndarray | None:
+    """Points where the boundaries cross, from shapely; None if they share a segment."""
+    hit = Polygon(p).exterior.intersection(Polygon(q).exterior)
+    if hit.is_empty:
+        return np.zeros((0, 2))
+    if isinstance(hit, Point):
+        return np.array(hit.coords)
+    if isinstance(hit, MultiPoint):
+        return np.array([g.coords[0] for g in hit.geoms])
+    return None
+
+
+def test_chord_endpoints_match_shapely_boundary_crossings(pairs, reference):
+    """A chord contact's width and normal come from the two points where the boundaries cross."""
+    ours = reference[0]
+    n_chord = 0
+    for (p, q), ov in zip(pairs, ours, strict=True):
+        if ov.area == 0.0:
+            continue
+        ref = _shapely_crossings(p, q)
+        assert ref is not None  # random pairs share no edge segment
+        if len(ref) != 2:
+            assert ov.kind == OVERLAP_FALLBACK
+            continue
+        assert ov.kind == OVERLAP_CHORD
+        n_chord += 1
+        size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
+        chord = ref[1] - ref[0]
+        assert ov.width == pytest.approx(np.hypot(*chord), abs=SHAPELY_RTOL * size)
+        assert abs(ov.normal @ chord) < SHAPELY_RTOL * size
+        assert np.hypot(*ov.normal) == pytest.approx(1.0, abs=1e-14)
+        # Out of p into q: p's boundary inside q lies ahead of the chord, q's behind it.
+        mid = 0.5 * (ref[0] + ref[1])
+        for v in p:
+            if Polygon(q).contains(Point(v)):
+                assert (v - mid) @ ov.normal > -SHAPELY_RTOL * size
+        for v in q:
+            if Polygon(p).contains(Point(v)):
+                assert (v - mid) @ ov.normal < SHAPELY_RTOL * size
+    assert n_chord > N_PAIRS // 3
+
+
+def test_sat_agrees_with_shapely_on_random_pairs(pairs, reference):
+    """SAT separates a pair exactly when shapely's intersection has no area (off exact touching)."""
+    for (p, q), shape in zip(pairs, reference[1], strict=True):
+        depth, axis = min_penetration_axis(p, q)
+        size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
+        if abs(depth) < TOUCH_RTOL * size:
+            continue
+        assert sat_separated(p, q) == (shape.area == 0.0)
+        assert sat_separated(p, q) == (not Polygon(p).intersects(Polygon(q)))
+        assert np.hypot(*axis) == pytest.approx(1.0, abs=1e-14)
+        if depth <= 0.0:
+            # Moving q along the axis by the gap (a no-op or an approach) keeps them apart.
+            assert shapely.distance(Polygon(p), Polygon(q)) >= -depth * (1 - 1e-9)
+        else:
+            # Moving q by the depth along the axis leaves them just touching.
+            moved = Polygon(q + (depth * (1 + 1e-9)) * axis)
+            assert Polygon(p).intersection(moved).area < 1e-9 * size**2
+
+
+def test_taichi_matches_numpy_on_random_pairs(batch, taichi_runtime):
+    """overlap_ti and its SAT twins give the NumPy reference's fields on random pairs."""
+    result, rounded = batch
+    rtol = _ti_rtol(taichi_runtime)
+    worst = {"area": 0.0, "centroid": 0.0, "normal": 0.0, "width": 0.0}
+    n_kind_differs = 0
+    for b, (p, q) in enumerate(rounded):
+        ov = overlap(p, q)
+        depth, _axis = min_penetration_axis(p, q)
+        size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
+        if abs(depth) > rtol * size:
+            assert result.separated[b] == (depth <= 0.0)
+            assert result.depth[b] == pytest.approx(depth, abs=rtol * size)
+        if result.kind[b] != ov.kind:
+            # Only a pair at a classification edge (touching, or a crossing at a vertex) may
+            # flip, and only in float32.
+            n_kind_differs += 1
+            continue
+        if ov.kind == OVERLAP_NONE:
+            continue
+        worst["area"] = max(worst["area"], abs(result.area[b] - ov.area) / size**2)
+        worst["centroid"] = max(
+            worst["centroid"], np.max(np.abs(result.centroid[b] - ov.centroid)) * ov.area / size**3
+        )
+        if ov.kind == OVERLAP_CHORD:
+            # The normal of a short chord turns by (endpoint error / width): compare the
+            # endpoint displacement this implies.
+            turn = np.max(np.abs(result.normal[b] - ov.normal)) * ov.width / size
+            worst["normal"] = max(worst["normal"], turn)
+            worst["width"] = max(worst["width"], abs(result.width[b] - ov.width) / size)
+    print(f"taichi vs numpy ({taichi_runtime[1]}): {worst}, kinds differ on {n_kind_differs}")
+    assert n_kind_differs <= (0 if taichi_runtime[1] == "f64" else N_PAIRS // 100)
+    for name, err in worst.items():
+        assert err < rtol, name
+
+
+def _square_into_face():
+    """A 1 m square pressed 0.1 m face-on into the top face of a 4 m square."""
+    return rectangle(4.0, 4.0), transform(rectangle(1.0, 1.0), [0.3, 2.4], 0.0)
+
+
+HAND_CASES = {
+    # name: (p, q, area, centroid, normal, width, kind)
+    "square face-on": (
+        *_square_into_face(),
+        0.1,
+        [0.3, 1.95],
+        [0.0, 1.0],
+        1.0,
+        OVERLAP_CHORD,
+    ),
+    "diamond corner into a face": (
+        rectangle(4.0, 4.0),
+        transform(diamond(1.0, 1.0), [-0.5, 2.4], 0.0),
+        # A right isosceles triangle of height 0.1 m: base 0.2 m, area 0.01 m^2.
+        0.01,
+        [-0.5, 2.0 - 0.1 / 3.0],
+        [0.0, 1.0],
+        0.2,
+        OVERLAP_CHORD,
+    ),
+    "containment": (
+        rectangle(4.0, 4.0),
+        transform(rectangle(1.0, 0.5), [1.0, 0.2], 0.0),
+        # Shortest way out of the big square: 1.5 m to the right, across which q is 0.5 m.
+        0.5,
+        [1.0, 0.2],
+        [1.0, 0.0],
+        0.5,
+        OVERLAP_FALLBACK,
+    ),
+    "touching edges": (
+        rectangle(2.0, 2.0),
+        transform(rectangle(2.0, 2.0), [2.0, 0.5], 0.0),
+        0.0,
+        [0.0, 0.0],
+        [0.0, 0.0],
+        0.0,
+        OVERLAP_NONE,
+    ),
+    "collinear faces, overlapping": (
+        rectangle(2.0, 2.0),
+        transform(rectangle(2.0, 2.0), [1.9, 0.0], 0.0),
+        # Top and bottom edges coincide: no clean crossing, the SAT axis gives the face normal.
+        0.2,
+        [0.95, 0.0],
+        [1.0, 0.0],
+        2.0,
+        OVERLAP_FALLBACK,
+    ),
+    "eight crossings": (
+        rectangle(2.0, 2.0),
+        diamond(2.4, 2.4),
+        # The diamond's corners poke 0.2 m out of each face: the square loses four corner
+        # triangles of legs 0.8 m. Least penetration: 2.2 m across p's first (bottom) edge.
+        4.0 - 4 * 0.32,
+        [0.0, 0.0],
+        [0.0, -1.0],
+        2.0,
+        OVERLAP_FALLBACK,
+    ),
+    "identical": (
+        diamond(2.0, 1.0),
+        diamond(2.0, 1.0),
+        # Every edge is a tie; the first edge of p wins: normal of edge (1,0)->(0,0.5).
+        1.0,
+        [0.0, 0.0],
+        [1.0 / np.sqrt(1.25) * 0.5, 1.0 / np.sqrt(1.25)],
+        # Extent of the diamond across that normal, between the x corners: 2 / sqrt(1.25).
+        2.0 / np.sqrt(1.25),
+        OVERLAP_FALLBACK,
+    ),
+}
+
+
+@pytest.mark.parametrize("name", list(HAND_CASES))
+def test_overlap_hand_cases(name, taichi_runtime):
+    """Face-on, corner, containment, touching, collinear, multi-crossing, identical: as by hand."""
+    p, q, area, centroid, normal, width, kind = HAND_CASES[name]
+    ov = overlap(p, q)
+    assert ov.kind == kind
+    assert ov.area == pytest.approx(area, abs=1e-12)
+    np.testing.assert_allclose(ov.centroid, centroid, atol=1e-12)
+    np.testing.assert_allclose(ov.normal, normal, atol=1e-12)
+    assert ov.width == pytest.approx(width, abs=1e-12)
+    # Same answers from the Taichi twin (float32 rounds the inputs and the answer).
+    tol = 1e-12 if taichi_runtime[1] == "f64" else 1e-5
+    pp, n_p = _pad([p])
+    qq, n_q = _pad([q])
+    ti_ov = overlap_batch(pp, n_p, qq, n_q)
+    assert ti_ov.kind[0] == kind
+    assert ti_ov.area[0] == pytest.approx(area, abs=tol)
+    np.testing.assert_allclose(ti_ov.centroid[0], centroid, atol=tol)
+    np.testing.assert_allclose(ti_ov.normal[0], normal, atol=tol)
+    assert ti_ov.width[0] == pytest.approx(width, abs=tol)
+
+
+def test_face_on_width_and_area_follow_the_depth():
+    """A square pressed face-on by depth d overlaps side * d, width = side, face normal."""
+    side = 0.7
+    for depth in (1e-6, 1e-3, 0.05, 0.3):
+        q = transform(rectangle(side, side), [0.2, 2.0 + 0.5 * side - depth], 0.0)
+        ov = overlap(rectangle(4.0, 4.0), q)
+        assert ov.kind == OVERLAP_CHORD
+        assert ov.area == pytest.approx(side * depth, rel=1e-9)
+        assert ov.width == pytest.approx(side, rel=1e-12)
+        np.testing.assert_allclose(ov.normal, [0.0, 1.0], atol=1e-12)
+
+
+def test_chord_tends_to_the_fallback_at_collinear_faces():
+    """Near-collinear faces give a chord within depth/width rad of the fallback's face normal."""
+    side, depth = 2.0, 0.01
+    p = rectangle(side, side)
+    collinear = overlap(p, transform(p, [side - depth, 0.0], 0.0))
+    assert collinear.kind == OVERLAP_FALLBACK
+    for shift in (1e-3, 1e-6, 1e-9):
+        near = overlap(p, transform(p, [side - depth, shift], 0.0))
+        assert near.kind == OVERLAP_CHORD
+        assert near.area == pytest.approx(collinear.area, abs=depth * shift * 1.01)
+        assert np.max(np.abs(near.normal - collinear.normal)) < 1.01 * depth / side
+        # The overlap itself is shorter by the shift; the chord adds (d / w)^2 / 2.
+        assert near.width == pytest.approx(collinear.width, rel=(depth / side) ** 2 + shift)
+
+
+def test_overlap_is_antisymmetric_in_its_arguments(pairs, reference):
+    """overlap(q, p) has the same area, centroid and width as overlap(p, q), opposite normal."""
+    for (p, q), ov in zip(pairs[:1000], reference[0][:1000], strict=True):
+        vo = overlap(q, p)
+        size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
+        assert vo.kind == ov.kind
+        assert vo.area == pytest.approx(ov.area, abs=SHAPELY_RTOL * size**2)
+        assert ov.area * np.max(np.abs(vo.centroid - ov.centroid)) < SHAPELY_RTOL * size**3
+        if ov.kind == OVERLAP_CHORD:
+            assert vo.width == pytest.approx(ov.width, abs=SHAPELY_RTOL * size)
+            np.testing.assert_allclose(vo.normal, -ov.normal, atol=SHAPELY_RTOL)
+
+
+def test_overlap_follows_a_rigid_motion_of_both_polygons(pairs, reference):
+    """Rotating and translating both polygons rotates and translates the contact, nothing else."""
+    rng = np.random.default_rng(SEED + 1)
+    for (p, q), ov in zip(pairs[:1000], reference[0][:1000], strict=True):
+        angle, shift = rng.uniform(0.0, 2.0 * np.pi), rng.uniform(-20.0, 20.0, 2)
+        rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        moved = overlap(transform(p, shift, angle), transform(q, shift, angle))
+        size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
+        # Coordinates grow to ~25 m, so round-off grows with them.
+        tol = 100 * SHAPELY_RTOL
+        assert moved.kind == ov.kind
+        assert moved.area == pytest.approx(ov.area, abs=tol * size**2)
+        if ov.kind == OVERLAP_NONE:
+            continue
+        assert (
+            ov.area * np.max(np.abs(moved.centroid - (rot @ ov.centroid + shift))) < tol * size**3
+        )
+        if ov.kind == OVERLAP_CHORD:
+            assert moved.width == pytest.approx(ov.width, abs=tol * size)
+            np.testing.assert_allclose(moved.normal, rot @ ov.normal, atol=tol)
+
+
+def test_mass_properties_match_shapely(pairs):
+    """Polygon area and centroid equal shapely's; the polar moment equals a fine quadrature."""
+    for p, _ in pairs[:300]:
+        area, centroid, _polar = mass_properties(p)
+        shape = Polygon(p)
+        assert area == pytest.approx(shape.area, rel=1e-12)
+        np.testing.assert_allclose(centroid, shape.centroid.coords[0], atol=1e-12)
+    # A w x l rectangle has J = A (w^2 + l^2) / 12 about its centroid, wherever it is.
+    area, centroid, polar = mass_properties(transform(rectangle(2.0, 0.5), [3.0, -1.0], 0.7))
+    assert polar == pytest.approx(1.0 * (4.0 + 0.25) / 12.0, rel=1e-12)
+    np.testing.assert_allclose(centroid, [3.0, -1.0], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("vertices", "message"),
+    [
+        ([[0, 0], [0, 1], [1, 1], [1, 0]], "clockwise"),
+        ([[0, 0], [2, 0], [2, 2], [1, 1], [0, 2]], "reflex"),
+        ([[0, 0], [1, 0], [2, 0], [2, 2], [0, 2]], "collinear"),
+        ([[0, 0], [1, 0]], "at least 3 vertices"),
+        ([[0, 0], [1, 0], [np.nan, 1]], "finite"),
+        ([[0, 0], [1, 1], [2, 2]], "zero area"),
+        ([[0, 0], [1, 0], [1, 0], [1, 1]], "repeated"),
+        ("square", "list of [x, y]"),
+    ],
+)
+def test_check_polygon_names_the_problem(vertices, message):
+    """check_polygon refuses a bad outline with a message that says what is wrong."""
+    with pytest.raises(PolygonError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        check_polygon(vertices, what="body 'floe'")
+    with pytest.raises(PolygonError, match="body 'floe'"):
+        check_polygon(vertices, what="body 'floe'")
+
+
+def test_check_polygon_accepts_the_library_shapes():
+    """Rectangles and diamonds from this module are valid floes."""
+    for v in (rectangle(2.0, 1.0), diamond(0.7, 1.0), transform(diamond(1.0, 2.0), [5, 5], 1.0)):
+        np.testing.assert_array_equal(check_polygon(v), v)

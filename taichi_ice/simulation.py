@@ -1,0 +1,283 @@
+"""Simulation: one scene (or a batch of scenes) stepped, sampled and written to HDF5.
+
+    sim = Simulation(load_scenario("scenarios/pillar.toml"), friction=RateState())
+    result = sim.run(until=20.0, out="runs/pillar_rs.h5")
+    result.series["friction_energy"][-1]
+
+The time step is the scene's (``dt = "auto"`` or seconds), shortened if needed so that an
+output interval is a whole number of steps: frames fall exactly on 0, interval, 2 interval...
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time as _time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import backend
+from .errors import TaichiIceError
+from .io import SERIES_ENERGY, RunWriter
+from .state import ENERGY_COUNT
+
+
+@dataclass
+class RunResult:
+    """What a run produced, per world (lists have one entry per world; a scene is world 0).
+
+    Attributes:
+        series: per world, ``{name: array}`` as in the HDF5 ``/series`` group.
+        paths: HDF5 files written (empty if ``out`` was None).
+        steps: steps taken. dt: time step (s). wall_time: seconds of wall clock.
+        status: 'complete' or 'failed'. failure: the error message if failed.
+    """
+
+    series: list[dict[str, np.ndarray]]
+    paths: list[Path] = field(default_factory=list)
+    steps: int = 0
+    dt: float = 0.0
+    wall_time: float = 0.0
+    status: str = "complete"
+    failure: str = ""
+
+    def __getattr__(self, name):
+        # A single scene reads like its only world: result.time, result.friction_energy ...
+        series = self.__dict__.get("series")
+        if series and len(series) == 1 and name in series[0]:
+            return series[0][name]
+        raise AttributeError(name)
+
+
+class Simulation:
+    """A scene, or a batch of independent scenes, on the Taichi fields of one World.
+
+    Args:
+        scene: a Scene, or a sequence of Scenes run together as independent worlds.
+        friction: a ``Coulomb`` or ``RateState`` law that replaces the scenes' own.
+        arch: 'cpu' or 'gpu'. precision: 'f64' or 'f32'.
+        dt: time step (s) overriding the scenes' (still refused above the stability limit
+            unless ``force_dt``).
+        slots: contact slots per body (default sized from the scene).
+    """
+
+    def __init__(
+        self,
+        scene,
+        friction=None,
+        arch: str = "cpu",
+        precision: str = "f64",
+        dt: float | None = None,
+        force_dt: bool = False,
+        slots: int | None = None,
+    ):
+        from .world import World
+
+        scenes = list(scene) if isinstance(scene, Sequence) else [scene]
+        if friction is not None:
+            scenes = [s.with_friction(friction) for s in scenes]
+        self.scenes = scenes
+        self.arch, self.precision = arch, precision
+        backend.init(arch, precision)
+        first = scenes[0].simulation
+        requested = dt if dt is not None else min(s.dt for s in scenes)
+        # Whole steps per output interval, so frames land on multiples of the interval.
+        self.frame_every = max(1, math.ceil(first.output_interval / requested * (1 - 1e-12)))
+        self.dt = first.output_interval / self.frame_every
+        self.series_every = max(1, round(first.series_interval / self.dt))
+        self.world = World(scenes, dt=self.dt, precision=precision, slots=slots,
+                           force_dt=force_dt)
+        # Kinetic and elastic energy at t = 0: the budget's starting capital.
+        self.initial_energy = self.world.energies().copy()
+
+    # ----------------------------------------------------------------------------------------
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s)."""
+        return self.world.time
+
+    @property
+    def steps(self) -> int:
+        return self.world.steps
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` steps (no output, no checks; call ``check`` or use ``run``)."""
+        for _ in range(n):
+            self.world.step()
+
+    def check(self) -> None:
+        """Raise CapacityError or DivergenceError if the last steps overflowed or diverged."""
+        self.world.check()
+
+    def positions(self, world: int = 0) -> np.ndarray:
+        """``(N, 2)`` body centroids of one world (m)."""
+        return self.world.positions()[self.world.world_slices()[world]]
+
+    def angles(self, world: int = 0) -> np.ndarray:
+        return self.world.angles()[self.world.world_slices()[world]]
+
+    def velocities(self, world: int = 0) -> np.ndarray:
+        return self.world.velocities()[self.world.world_slices()[world]]
+
+    def omegas(self, world: int = 0) -> np.ndarray:
+        return self.world.omegas()[self.world.world_slices()[world]]
+
+    def energies(self, world: int = 0) -> dict[str, float]:
+        """The energy budget of one world now (J), with its residual."""
+        e = self.world.energies()[world]
+        out = dict(zip(SERIES_ENERGY, (float(x) for x in e[:ENERGY_COUNT]), strict=True))
+        e0 = dict(zip(SERIES_ENERGY, self.initial_energy[world][:ENERGY_COUNT], strict=True))
+        out["residual"] = float(energy_residual(out, e0))
+        return out
+
+    # ----------------------------------------------------------------------------------------
+
+    def run(
+        self,
+        until: float | None = None,
+        out: str | Path | Sequence[str | Path] | None = None,
+        progress: bool = False,
+    ) -> RunResult:
+        """Run to ``until`` (s; default the scene's duration), sampling series and frames.
+
+        Args:
+            until: end time (s), measured from t = 0 of the scene.
+            out: HDF5 file (one scene) or one file per world (a batch); None writes nothing.
+            progress: show a progress bar on stderr.
+
+        Returns:
+            RunResult with the series of every world.
+
+        Raises:
+            DivergenceError, CapacityError: the run stopped; every file written so far is
+                closed with status 'failed' and the reason, and stays readable.
+        """
+        until = self.scenes[0].simulation.duration if until is None else float(until)
+        n_total = int(round(until / self.dt))
+        paths = _paths(out, len(self.scenes))
+        attrs = {"arch": self.arch, "precision": self.precision, "dt": self.dt,
+                 "stable_dt": self.world.stable_dt, "wall_time": 0.0}
+        writers = [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes, strict=True)]
+        series: list[dict[str, list]] = [
+            {k: [] for k in ("time", "probe_force", "n_contacts", *SERIES_ENERGY)}
+            for _ in self.scenes
+        ]
+        bar = Progress(n_total, self.dt, enabled=progress)
+        start = _time.perf_counter()
+        status, failure = "complete", ""
+        try:
+            self._sample(series, writers, sample_dt=self.series_every * self.dt)
+            self._frame(writers)
+            for k in range(1, n_total + 1):
+                self.world.step()
+                if k % self.series_every == 0 or k == n_total:
+                    self.world.check()
+                    steps_since = k % self.series_every or self.series_every
+                    self._sample(series, writers, sample_dt=steps_since * self.dt)
+                    bar.update(k)
+                if k % self.frame_every == 0:
+                    self._frame(writers)
+                    for w in writers:
+                        w.flush(self.world.steps)
+        except (TaichiIceError, KeyboardInterrupt) as exc:
+            status = "failed"
+            failure = str(exc) or type(exc).__name__
+            raise
+        finally:
+            wall = _time.perf_counter() - start
+            bar.close()
+            for w in writers:
+                w.close(status, failure, steps=self.world.steps, wall_time=wall)
+        result = RunResult(
+            series=[{k: np.asarray(v) for k, v in s.items()} for s in series],
+            paths=paths, steps=n_total, dt=self.dt, wall_time=wall,
+        )
+        return result
+
+    def _sample(self, series, writers, sample_dt: float) -> None:
+        energies = self.world.energies()
+        impulses = self.world.take_probe_impulses()
+        contacts = self.world.contact_counts()
+        t = self.world.time
+        for w, (s, probes) in enumerate(zip(series, self.world.probe_slices(), strict=True)):
+            force = impulses[probes] / sample_dt if self.world.steps else impulses[probes] * 0
+            row = (t, force, int(contacts[w]), *energies[w][:ENERGY_COUNT])
+            for key, value in zip(s, row, strict=True):
+                s[key].append(value)
+            if writers:
+                writers[w].add_sample(t, force, energies[w][:ENERGY_COUNT], int(contacts[w]))
+
+    def _frame(self, writers) -> None:
+        if not writers:
+            return
+        pos, ang = self.world.positions(), self.world.angles()
+        vel, om = self.world.velocities(), self.world.omegas()
+        for w, sl in zip(writers, self.world.world_slices(), strict=True):
+            w.add_frame(self.world.time, pos[sl], ang[sl], vel[sl], om[sl])
+
+
+def energy_residual(e: dict, initial: dict | None = None):
+    """Energy budget residual (J): what came in minus where it is now.
+
+        residual = (kinetic + elastic)(0) + work_in - (kinetic + elastic + friction + viscous
+                   + drag)
+
+    Args:
+        e: the terms now (floats or arrays over time, as in ``/series``).
+        initial: the terms at t = 0; default the first entry of each array in ``e``.
+    """
+    if initial is None:
+        initial = {k: np.asarray(v).reshape(-1)[0] for k, v in e.items()}
+    start = initial["kinetic_energy"] + initial["elastic_energy"]
+    return start + e["work_in"] - (
+        e["kinetic_energy"] + e["elastic_energy"] + e["friction_energy"] + e["viscous_energy"]
+        + e["drag_energy"]
+    )
+
+
+def _paths(out, n_worlds: int) -> list[Path]:
+    if out is None:
+        return []
+    if isinstance(out, str | Path):
+        if n_worlds != 1:
+            raise ValueError(f"a batch of {n_worlds} worlds needs one output path per world")
+        return [Path(out)]
+    paths = [Path(p) for p in out]
+    if len(paths) != n_worlds:
+        raise ValueError(f"{len(paths)} output paths for {n_worlds} worlds")
+    return paths
+
+
+class Progress:
+    """A one-line progress bar on stderr: simulated time, steps per second, time left."""
+
+    def __init__(self, total: int, dt: float, enabled: bool = True, width: int = 30):
+        self.total, self.dt, self.enabled, self.width = max(total, 1), dt, enabled, width
+        self.start = _time.perf_counter()
+        self.last = 0.0
+
+    def update(self, k: int) -> None:
+        if not self.enabled:
+            return
+        now = _time.perf_counter()
+        if now - self.last < 0.2 and k < self.total:
+            return
+        self.last = now
+        frac = k / self.total
+        rate = k / max(now - self.start, 1e-9)
+        eta = (self.total - k) / max(rate, 1e-9)
+        filled = int(self.width * frac)
+        sys.stderr.write(
+            f"\r[{'#' * filled}{'.' * (self.width - filled)}] {100 * frac:5.1f}%  "
+            f"t = {k * self.dt:7.3f} s  {rate:8.0f} steps/s  {eta:5.0f} s left "
+        )
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()

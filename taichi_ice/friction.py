@@ -51,6 +51,7 @@ __all__ = [
     "RK4_STABILITY_LIMIT",
     "Coulomb",
     "RateState",
+    "method_code",
     "rate_state_mu",
     "rate_state_mu_np",
     "respond_batch",
@@ -194,6 +195,15 @@ def _method_code(method: str | int) -> int:
     if isinstance(method, int) and not isinstance(method, bool) and 0 <= method < len(METHODS):
         return method
     raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
+
+
+def method_code(method: str | int) -> int:
+    """The ``METHOD_*`` code of a method name (a valid code passes through).
+
+    Raises:
+        ValueError: an unknown method, with the list of known ones.
+    """
+    return _method_code(method)
 
 
 def stability_limit(method: str | int) -> float:

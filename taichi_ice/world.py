@@ -219,10 +219,10 @@ class World:
     # ----------------------------------------------------------------------------------------
 
     def _theta_method(self) -> int:
-        from .friction import METHOD_EXPONENTIAL, RateState, _method_code
+        from .friction import METHOD_EXPONENTIAL, RateState, method_code
 
         law = self.scenes[0].friction
-        return _method_code(law.method) if isinstance(law, RateState) else METHOD_EXPONENTIAL
+        return method_code(law.method) if isinstance(law, RateState) else METHOD_EXPONENTIAL
 
     def _characteristic_width(self) -> float:
         """Longest edge of any dynamic body (m): the widest contact that sets the stiffness."""

@@ -78,6 +78,8 @@ def test_defaults_are_the_papers():
     assert Coulomb().mu == 0.5 and Coulomb(0.3).to_dict() == {"law": "coulomb", "mu": 0.3}
     assert RateState(t_c=2.0, method="rk4").params[4] == 2.0
     assert RateState(method="rk4").method == "rk4"
+    assert [friction.method_code(m) for m in RateState.methods] == [0, 1, 2, 3]
+    assert friction.METHOD_RK4 == friction.method_code("rk4") == 3
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,169 @@
+"""The ``taichi-ice`` command (also ``python -m taichi_ice``).
+
+A user's mistake (a bad scene file, an unstable dt, a run that diverged) ends with one line
+on stderr naming what to fix and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import __version__
+from .errors import TaichiIceError
+
+EXAMPLES = {
+    "run": """examples:
+  taichi-ice run scenarios/pushed_field.toml --out runs/pushed.h5
+  taichi-ice run scenarios/pushed_field.toml --friction rate-state --until 5
+  taichi-ice run scenarios/two_squares.toml --friction coulomb:0.3 --dt 5e-5 --precision f32""",
+    "validate": """examples:
+  taichi-ice validate --out out/validation          # Figure 3, exact solutions, stability
+  taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)""",
+    "plot": """examples:
+  taichi-ice plot runs/pushed.h5                    # figures beside the file
+  taichi-ice plot runs/pushed.h5 --out figs/ --animate""",
+}
+
+
+def parse_friction(text: str):
+    """``coulomb``, ``coulomb:0.5``, ``rate-state`` or ``rate-state:A=0.05,t_c=2`` to a law."""
+    from .friction import Coulomb, RateState
+
+    name, _, args = text.partition(":")
+    name = name.strip().lower()
+    try:
+        if name == "coulomb":
+            return Coulomb(float(args)) if args else Coulomb()
+        if name in ("rate-state", "ratestate", "rs"):
+            kw = {}
+            for item in filter(None, args.split(",")):
+                key, eq, value = item.partition("=")
+                if not eq:
+                    raise ValueError(f"expected KEY=VALUE, got {item!r}")
+                key = key.strip()
+                kw[key] = value.strip() if key == "method" else float(value)
+            return RateState(**kw)
+    except (TypeError, ValueError) as exc:
+        raise argparse.ArgumentTypeError(f"--friction {text!r}: {exc}") from None
+    raise argparse.ArgumentTypeError(
+        f"--friction {text!r}: unknown law; use coulomb, coulomb:MU, rate-state or "
+        "rate-state:A=..,B=..,mu0=..,v_star=..,t_c=..,method=.."
+    )
+
+
+def parse_dt(text: str):
+    if text == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--dt {text!r}: use 'auto' or seconds") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"--dt {text!r}: must be positive")
+    return value
+
+
+def _cmd_run(args) -> int:
+    import numpy as np
+
+    from .scenario import load_scenario
+    from .simulation import Simulation
+
+    scene = load_scenario(args.scene)
+    out = args.out or str(Path("runs") / (Path(args.scene).stem + ".h5"))
+    sim = Simulation(scene, friction=args.friction, arch=args.arch, precision=args.precision,
+                     dt=args.dt, force_dt=args.force_dt, slots=args.slots)
+    law = sim.scenes[0].friction
+    print(f"{args.scene}: {scene.n_bodies} bodies, {law!r}, dt = {sim.dt:.3g} s "
+          f"(limit {sim.world.stable_dt:.3g} s), {args.arch}/{args.precision}", file=sys.stderr)
+    result = sim.run(until=args.until, out=out, progress=not args.quiet)
+    e = sim.energies()
+    probe = result.series[0]["probe_force"]
+    peak = float(np.max(np.linalg.norm(probe, axis=-1))) if probe.size else 0.0
+    scale = max(abs(e["work_in"]), e["kinetic_energy"] + e["friction_energy"], 1e-300)
+    print(
+        f"wrote {out}: {result.steps} steps in {result.wall_time:.1f} s "
+        f"({result.steps / max(result.wall_time, 1e-9):.0f} steps/s); "
+        f"peak probe force {peak / 1e3:.3g} kN; friction {e['friction_energy']:.4g} J; "
+        f"work in {e['work_in']:.4g} J; budget residual {e['residual']:.3g} J "
+        f"({100 * e['residual'] / scale:.2f} %)"
+    )
+    return 0
+
+
+def _cmd_validate(args) -> int:
+    from .studies import validate_command
+
+    return validate_command(args.out, speed=args.speed, quick=args.quick)
+
+
+def _cmd_plot(args) -> int:
+    from .plots import plot_run
+
+    written = plot_run(args.run, out_dir=args.out, animate=args.animate)
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="taichi-ice",
+        description="Sea-ice rubble DEM with rate-and-state friction (Taichi, CPU and GPU).",
+    )
+    parser.add_argument("--version", action="version", version=f"taichi-ice {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def add(name, help_, func):
+        p = sub.add_parser(name, help=help_, description=help_, epilog=EXAMPLES.get(name),
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        p.set_defaults(func=func)
+        return p
+
+    p = add("run", "run one scene and write its HDF5 file", _cmd_run)
+    p.add_argument("scene", help="scene file (TOML), e.g. scenarios/pushed_field.toml")
+    p.add_argument("--out", help="HDF5 output (default runs/<scene>.h5)")
+    p.add_argument("--friction", type=parse_friction, default=None,
+                   help="override the scene's law: coulomb[:MU] or rate-state[:A=..,B=..,...]")
+    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
+    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
+    p.add_argument("--dt", type=parse_dt, default=None, help="'auto' (default) or seconds")
+    p.add_argument("--force-dt", action="store_true",
+                   help="accept a dt above the stability limit (for stability studies)")
+    p.add_argument("--until", type=float, default=None, help="end time, s (default: duration)")
+    p.add_argument("--slots", type=int, default=None, help="contact slots per body")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    p = add("validate", "check the friction law against its exact solutions (Figure 3)",
+            _cmd_validate)
+    p.add_argument("--out", default="out/validation", help="output folder")
+    p.add_argument("--speed", action="store_true", help="also chart speed against accuracy")
+    p.add_argument("--quick", action="store_true", help="small sizes (for tests)")
+
+    p = add("plot", "figures (and an animation) of a run file", _cmd_plot)
+    p.add_argument("run", help="HDF5 run file")
+    p.add_argument("--out", default=None, help="folder for the figures (default: beside the file)")
+    p.add_argument("--animate", action="store_true", help="also write an animation (GIF)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except TaichiIceError as exc:
+        print(f"taichi-ice: error: {exc}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as exc:
+        print(f"taichi-ice: error: {exc.filename or exc}: no such file", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("taichi-ice: interrupted (files written so far are kept)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -275,4 +275,9 @@ class ContactStage:
             for k in range(ti.min(n, self.n_cand)):
                 used = self.pair(i, cand[k], cur, used, dt)
             d.contact_count[nxt, i] = ti.min(used, self.layout.slots)
-            ti.atomic_max(d.status[STATUS_SLOT_OVERFLOW], ti.max(used, n - self.n_cand + self.layout.slots))
+            # More contacts than slots, or more near neighbours than the candidate list holds,
+            # is reported (never silently dropped): the caller turns it into CapacityError.
+            need = used
+            if n > self.n_cand:
+                need = ti.max(need, n)
+            ti.atomic_max(d.status[STATUS_SLOT_OVERFLOW], need)

@@ -45,7 +45,6 @@ from .state import (
 )
 
 
-
 @ti.func
 def cross2(a, b):
     """z-component of the cross product of two 2-vectors."""
@@ -117,12 +116,16 @@ class ContactStage:
         self.n_cand = 2 * layout.slots
 
     @ti.func
-    def outline(self, i):
-        """World coordinates of body i's outline in a (MAXV, 2) matrix, and its count."""
+    def outline(self, i, origin):
+        """Body i's outline relative to ``origin`` in a (MAXV, 2) matrix, and its count.
+
+        Clipping near the pair rather than in world coordinates keeps float32 accurate in
+        large fields: its resolution then scales with the bodies' size, not the domain's.
+        """
         m, d = ti.static((self.model, self.data))
         p = ti.Matrix.zero(self.layout.real, self.maxv, 2)
         c, s = ti.cos(d.body_angle[i]), ti.sin(d.body_angle[i])
-        x = d.body_pos[i]
+        x = d.body_pos[i] - origin
         start, count = m.body_vert_start[i], m.body_vert_count[i]
         for k in range(count):
             v = m.vert_local[start + k]
@@ -144,8 +147,8 @@ class ContactStage:
         nxt = 1 - cur
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
         if True:
-            p, n_p = self.outline(i)
-            q, n_q = self.outline(j)
+            p, n_p = self.outline(i, xi_)
+            q, n_q = self.outline(j, xi_)
             area, point, normal, width, kind = overlap_ti(p, n_p, q, n_q)
             if area > 0.0:
                 # Memory of this pair from the last step, if it was in contact then.
@@ -160,7 +163,7 @@ class ContactStage:
                     xi = d.contact_xi[cur, i, found]
                     area_prev = d.contact_area[cur, i, found]
                     elastic = d.contact_elastic[cur, i, found]
-                r_i, r_j = point - xi_, point - xj_
+                r_i, r_j = point, point + (xi_ - xj_)  # point is relative to body i
                 v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
                     d.body_vel[i] + perp(d.body_omega[i], r_i)
                 )
@@ -196,7 +199,9 @@ class ContactStage:
                 self.add_force(i, -force, -cross2(r_i, force))
 
                 # Elastic energy stored in the overlap: integral of k_e A dA / L.
-                elastic += self.k_e * 0.5 * (area + area_prev) * (area - area_prev) / ti.max(width, 1e-9)
+                elastic += (
+                    self.k_e * 0.5 * (area + area_prev) * (area - area_prev) / ti.max(width, 1e-9)
+                )
                 d.body_energy[i, BODY_FRICTION] += slip_work
                 d.body_energy[i, BODY_VISCOUS] += (f_n - f_el) * approach * dt + damp_work
 

@@ -4,7 +4,8 @@ Seeded random convex pairs (3 to 8 vertices, about a third overlapping, the rest
 the SAT) go through ``geometry.overlap`` one by one and through ``geometry.overlap_batch``
 (``overlap_ti`` in one parallel kernel; it also writes the SAT outputs that the tests check)
 in batches of growing size. The Taichi timings exclude the first call, which compiles
-the kernel, and include the host-to-kernel copies of the ndarrays. Results go to ``<out>/overlap.csv`` and ``<out>/overlap.json``.
+the kernel, and include the host-to-kernel copies of the ndarrays. Results go to
+``<out>/overlap.csv`` and ``<out>/overlap.json``.
 
     python benchmarks/overlap.py --out out/bench
     python benchmarks/overlap.py --arch gpu --precision f32 --sizes 10000 1000000

@@ -7,7 +7,6 @@ error rather than a silent re-initialisation, which would free every field alrea
 
 from __future__ import annotations
 
-
 ARCHES = ("cpu", "gpu", "cuda", "vulkan", "metal")
 PRECISIONS = ("f64", "f32")
 

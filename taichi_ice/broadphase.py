@@ -67,7 +67,9 @@ class SpatialHash:
 
     @ti.func
     def cell_of(self, pos):
-        return ti.Vector([ti.floor(pos[0] * self.inv_cell, ti.i32), ti.floor(pos[1] * self.inv_cell, ti.i32)])
+        return ti.Vector(
+            [ti.floor(pos[0] * self.inv_cell, ti.i32), ti.floor(pos[1] * self.inv_cell, ti.i32)]
+        )
 
     @ti.kernel
     def build(self):

@@ -73,11 +73,21 @@ def _cmd_run(args) -> int:
 
     scene = load_scenario(args.scene)
     out = args.out or str(Path("runs") / (Path(args.scene).stem + ".h5"))
-    sim = Simulation(scene, friction=args.friction, arch=args.arch, precision=args.precision,
-                     dt=args.dt, force_dt=args.force_dt, slots=args.slots)
+    sim = Simulation(
+        scene,
+        friction=args.friction,
+        arch=args.arch,
+        precision=args.precision,
+        dt=args.dt,
+        force_dt=args.force_dt,
+        slots=args.slots,
+    )
     law = sim.scenes[0].friction
-    print(f"{args.scene}: {scene.n_bodies} bodies, {law!r}, dt = {sim.dt:.3g} s "
-          f"(limit {sim.world.stable_dt:.3g} s), {args.arch}/{args.precision}", file=sys.stderr)
+    print(
+        f"{args.scene}: {scene.n_bodies} bodies, {law!r}, dt = {sim.dt:.3g} s "
+        f"(limit {sim.world.stable_dt:.3g} s), {args.arch}/{args.precision}",
+        file=sys.stderr,
+    )
     result = sim.run(until=args.until, out=out, progress=not args.quiet)
     e = sim.energies()
     probe = result.series[0]["probe_force"]
@@ -117,27 +127,40 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def add(name, help_, func):
-        p = sub.add_parser(name, help=help_, description=help_, epilog=EXAMPLES.get(name),
-                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        p = sub.add_parser(
+            name,
+            help=help_,
+            description=help_,
+            epilog=EXAMPLES.get(name),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
         p.set_defaults(func=func)
         return p
 
     p = add("run", "run one scene and write its HDF5 file", _cmd_run)
     p.add_argument("scene", help="scene file (TOML), e.g. scenarios/pushed_field.toml")
     p.add_argument("--out", help="HDF5 output (default runs/<scene>.h5)")
-    p.add_argument("--friction", type=parse_friction, default=None,
-                   help="override the scene's law: coulomb[:MU] or rate-state[:A=..,B=..,...]")
+    p.add_argument(
+        "--friction",
+        type=parse_friction,
+        default=None,
+        help="override the scene's law: coulomb[:MU] or rate-state[:A=..,B=..,...]",
+    )
     p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
     p.add_argument("--precision", default="f64", choices=["f64", "f32"])
     p.add_argument("--dt", type=parse_dt, default=None, help="'auto' (default) or seconds")
-    p.add_argument("--force-dt", action="store_true",
-                   help="accept a dt above the stability limit (for stability studies)")
+    p.add_argument(
+        "--force-dt",
+        action="store_true",
+        help="accept a dt above the stability limit (for stability studies)",
+    )
     p.add_argument("--until", type=float, default=None, help="end time, s (default: duration)")
     p.add_argument("--slots", type=int, default=None, help="contact slots per body")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    p = add("validate", "check the friction law against its exact solutions (Figure 3)",
-            _cmd_validate)
+    p = add(
+        "validate", "check the friction law against its exact solutions (Figure 3)", _cmd_validate
+    )
     p.add_argument("--out", default="out/validation", help="output folder")
     p.add_argument("--speed", action="store_true", help="also chart speed against accuracy")
     p.add_argument("--quick", action="store_true", help="small sizes (for tests)")

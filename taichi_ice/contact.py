@@ -149,7 +149,7 @@ class ContactStage:
         if True:
             p, n_p = self.outline(i, xi_)
             q, n_q = self.outline(j, xi_)
-            area, point, normal, width, kind = overlap_ti(p, n_p, q, n_q)
+            area, point, normal, width, _kind = overlap_ti(p, n_p, q, n_q)
             if area > 0.0:
                 # Memory of this pair from the last step, if it was in contact then.
                 found = -1

@@ -20,14 +20,21 @@ import taichi as ti
 
 
 def drag_coefficients(
-    area: float, thickness: float, ice_density: float, water_density: float, form: float, skin: float
+    area: float,
+    thickness: float,
+    ice_density: float,
+    water_density: float,
+    form: float,
+    skin: float,
 ) -> tuple[float, float]:
     """(c_lin in kg/m, c_rot in kg m^2) of one floe; see the module docstring."""
     draft = ice_density * thickness / water_density
     radius = math.sqrt(area / math.pi)
     c_lin = 0.5 * water_density * (form * draft * 2.0 * radius + skin * area)
-    c_rot = 0.5 * water_density * (
-        form * draft * 2.0 * math.pi * radius**4 + skin * 2.0 * math.pi * radius**5 / 5.0
+    c_rot = (
+        0.5
+        * water_density
+        * (form * draft * 2.0 * math.pi * radius**4 + skin * 2.0 * math.pi * radius**5 / 5.0)
     )
     return c_lin, c_rot
 

@@ -60,7 +60,9 @@ class EnergyMeter:
                     )
                 for s in range(d.contact_count[cur, i]):
                     xi = ti.cast(d.contact_xi[cur, i, s], ti.f64)
-                    elastic += ti.cast(d.contact_elastic[cur, i, s], ti.f64) + 0.5 * self.k_t * xi * xi
+                    elastic += (
+                        ti.cast(d.contact_elastic[cur, i, s], ti.f64) + 0.5 * self.k_t * xi * xi
+                    )
                 friction += d.body_energy[i, BODY_FRICTION]
                 viscous += d.body_energy[i, BODY_VISCOUS]
                 drag += d.body_energy[i, BODY_DRAG]

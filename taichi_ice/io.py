@@ -106,8 +106,13 @@ class RunWriter:
 
     def add_frame(self, time: float, position, angle, velocity, omega) -> None:
         """One frame of every body's state."""
-        row = {"time": time, "position": position, "angle": angle, "velocity": velocity,
-               "omega": omega}
+        row = {
+            "time": time,
+            "position": position,
+            "angle": angle,
+            "velocity": velocity,
+            "omega": omega,
+        }
         for name, value in row.items():
             _append(self.frames[name], value)
 

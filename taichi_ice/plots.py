@@ -50,8 +50,9 @@ def draw_bodies(ax, run: dict, frame: int) -> None:
     ax.set_aspect("equal")
 
 
-def plot_run(path: str | Path, out_dir: str | Path | None = None, animate: bool = False,
-             snapshots: int = 6) -> list[Path]:
+def plot_run(
+    path: str | Path, out_dir: str | Path | None = None, animate: bool = False, snapshots: int = 6
+) -> list[Path]:
     """Write the figures of one run file; returns their paths.
 
     Figures: ``<stem>_probe_force.png`` (force magnitude on each probe body against time),
@@ -82,8 +83,14 @@ def plot_run(path: str | Path, out_dir: str | Path | None = None, animate: bool 
     written.append(_save(fig, out / f"{path.stem}_probe_force.png"))
 
     fig, ax = plt.subplots(figsize=(7, 4))
-    for name in ("work_in", "kinetic_energy", "elastic_energy", "friction_energy",
-                 "viscous_energy", "drag_energy"):
+    for name in (
+        "work_in",
+        "kinetic_energy",
+        "elastic_energy",
+        "friction_energy",
+        "viscous_energy",
+        "drag_energy",
+    ):
         ax.plot(t, s[name], label=name.replace("_", " "))
     ax.plot(t, energy_residual(s), "k--", label="residual")
     ax.set_xlabel("time (s)")
@@ -113,8 +120,11 @@ def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     s, fr = run["series"], run["frames"]
-    force = np.linalg.norm(s["probe_force"], axis=-1).sum(axis=-1) / 1e3 if s[
-        "probe_force"].size else np.zeros_like(s["time"])
+    force = (
+        np.linalg.norm(s["probe_force"], axis=-1).sum(axis=-1) / 1e3
+        if s["probe_force"].size
+        else np.zeros_like(s["time"])
+    )
     fig, (ax_b, ax_f) = plt.subplots(1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]})
 
     def draw(f):

@@ -88,8 +88,7 @@ class Simulation:
         self.frame_every = max(1, math.ceil(first.output_interval / requested * (1 - 1e-12)))
         self.dt = first.output_interval / self.frame_every
         self.series_every = max(1, round(first.series_interval / self.dt))
-        self.world = World(scenes, dt=self.dt, precision=precision, slots=slots,
-                           force_dt=force_dt)
+        self.world = World(scenes, dt=self.dt, precision=precision, slots=slots, force_dt=force_dt)
         # Kinetic and elastic energy at t = 0: the budget's starting capital.
         self.initial_energy = self.world.energies().copy()
 
@@ -157,11 +156,21 @@ class Simulation:
                 closed with status 'failed' and the reason, and stays readable.
         """
         until = self.scenes[0].simulation.duration if until is None else float(until)
-        n_total = int(round(until / self.dt))
+        n_total = round(until / self.dt)
         paths = _paths(out, len(self.scenes))
-        attrs = {"arch": self.arch, "precision": self.precision, "dt": self.dt,
-                 "stable_dt": self.world.stable_dt, "wall_time": 0.0}
-        writers = [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes, strict=True)]
+        attrs = {
+            "arch": self.arch,
+            "precision": self.precision,
+            "dt": self.dt,
+            "stable_dt": self.world.stable_dt,
+            "wall_time": 0.0,
+        }
+        # No ``out``: no files (zip(strict=True) would refuse zero paths for N scenes).
+        writers = (
+            [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes, strict=True)]
+            if paths
+            else []
+        )
         series: list[dict[str, list]] = [
             {k: [] for k in ("time", "probe_force", "n_contacts", *SERIES_ENERGY)}
             for _ in self.scenes
@@ -194,7 +203,10 @@ class Simulation:
                 w.close(status, failure, steps=self.world.steps, wall_time=wall)
         result = RunResult(
             series=[{k: np.asarray(v) for k, v in s.items()} for s in series],
-            paths=paths, steps=n_total, dt=self.dt, wall_time=wall,
+            paths=paths,
+            steps=n_total,
+            dt=self.dt,
+            wall_time=wall,
         )
         return result
 
@@ -231,11 +243,20 @@ def energy_residual(e: dict, initial: dict | None = None):
         initial: the terms at t = 0; default the first entry of each array in ``e``.
     """
     if initial is None:
-        initial = {k: np.asarray(v).reshape(-1)[0] for k, v in e.items()}
+        # Only the energy terms: a whole ``/series`` dict also holds probe_force, which is
+        # empty (T x 0 x 2) in a scene with no probe.
+        initial = {k: np.asarray(e[k]).reshape(-1)[0] for k in SERIES_ENERGY}
     start = initial["kinetic_energy"] + initial["elastic_energy"]
-    return start + e["work_in"] - (
-        e["kinetic_energy"] + e["elastic_energy"] + e["friction_energy"] + e["viscous_energy"]
-        + e["drag_energy"]
+    return (
+        start
+        + e["work_in"]
+        - (
+            e["kinetic_energy"]
+            + e["elastic_energy"]
+            + e["friction_energy"]
+            + e["viscous_energy"]
+            + e["drag_energy"]
+        )
     )
 
 

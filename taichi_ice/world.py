@@ -245,9 +245,24 @@ class World:
         """Concatenate every world's bodies (world-major) into the NumPy side of the batch."""
         from .friction import RateState
 
-        cols: dict[str, list] = {k: [] for k in ("world", "kind", "mass", "inertia", "radius",
-                                                 "count", "force", "drag", "probe", "pos",
-                                                 "angle", "vel", "omega")}
+        cols: dict[str, list] = {
+            k: []
+            for k in (
+                "world",
+                "kind",
+                "mass",
+                "inertia",
+                "radius",
+                "count",
+                "force",
+                "drag",
+                "probe",
+                "pos",
+                "angle",
+                "vel",
+                "omega",
+            )
+        }
         verts: list[np.ndarray] = []
         mu = np.zeros(len(self.scenes))
         rate_state = np.zeros((len(self.scenes), 5))
@@ -270,8 +285,14 @@ class World:
                 if s.water is not None:
                     area = masses[i] / (s.ice.density * s.ice.thickness)
                     cols["drag"].append(
-                        drag_coefficients(area, s.ice.thickness, s.ice.density, s.water.density,
-                                          s.water.form_drag, s.water.skin_drag)
+                        drag_coefficients(
+                            area,
+                            s.ice.thickness,
+                            s.ice.density,
+                            s.water.density,
+                            s.water.form_drag,
+                            s.water.skin_drag,
+                        )
                     )
                 else:
                     cols["drag"].append((0.0, 0.0))
@@ -295,7 +316,9 @@ class World:
         small = radius <= r_small * (1.0 + 1e-9)
         large_ids = np.flatnonzero(~small).astype(np.int32)
         n_worlds = len(self.scenes)
-        world_large_start = np.searchsorted(world[large_ids], np.arange(n_worlds + 1)).astype(np.int32)
+        world_large_start = np.searchsorted(world[large_ids], np.arange(n_worlds + 1)).astype(
+            np.int32
+        )
         world_body_start = np.searchsorted(world, np.arange(n_worlds + 1)).astype(np.int32)
         large_per_world = np.diff(world_large_start).max(initial=0)
         vert_start = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int32) if n else count

@@ -10,8 +10,12 @@ import pytest
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    parser.addoption("--arch", default="cpu", help="Taichi arch for the kernels: cpu (default) or gpu")
-    parser.addoption("--precision", default="f64", help="Taichi default float: f64 (default) or f32")
+    parser.addoption(
+        "--arch", default="cpu", help="Taichi arch for the kernels: cpu (default) or gpu"
+    )
+    parser.addoption(
+        "--precision", default="f64", help="Taichi default float: f64 (default) or f32"
+    )
 
 
 @pytest.fixture(scope="session", autouse=True)

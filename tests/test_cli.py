@@ -28,8 +28,19 @@ def test_run_writes_a_complete_file_and_a_summary(tmp_path, capsys):
 def test_friction_override_is_recorded(tmp_path):
     """`--friction coulomb:0.3` replaces the scene's law, and the file says so."""
     out = tmp_path / "sq.h5"
-    main(["run", TWO_SQUARES, "--out", str(out), "--until", "0.05", "--quiet",
-          "--friction", "coulomb:0.3"])
+    main(
+        [
+            "run",
+            TWO_SQUARES,
+            "--out",
+            str(out),
+            "--until",
+            "0.05",
+            "--quiet",
+            "--friction",
+            "coulomb:0.3",
+        ]
+    )
     with h5py.File(out, "r") as f:
         assert f.attrs["friction"] == "coulomb"
         assert '"mu": 0.3' in f.attrs["friction_params"]
@@ -52,8 +63,9 @@ def test_parse_friction():
 )
 def test_mistakes_end_in_one_line_without_traceback(args, message):
     """A missing file or an unstable dt: exit 2, one error line naming the fix, no traceback."""
-    proc = subprocess.run([sys.executable, "-m", "taichi_ice", *args], capture_output=True,
-                          text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-m", "taichi_ice", *args], capture_output=True, text=True, timeout=300
+    )
     assert proc.returncode == 2
     assert message in proc.stderr
     assert "Traceback" not in proc.stderr

@@ -7,7 +7,8 @@ For every candidate pair the owner body's thread clips the two outlines
   area, ``L`` the contact width (chord), ``v_n`` the approach speed along the normal;
 - tangential force from a stick spring ``k_t`` and dashpot ``c_t`` on the tangential stretch
   ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979): beyond the cap the contact slips,
-  ``xi`` is pulled back to the cap and the slip distance times the cap is frictional work;
+  the spring-dashpot relaxes toward the cap and the slip distance times the cap is
+  frictional work;
 - ``mu`` from the batch's law: Coulomb, or rate-and-state with ``theta`` carried by the
   contact, started in equilibrium at its first slip rate and advanced with
   ``friction.theta_step`` (Lishman et al. 2013).
@@ -22,8 +23,9 @@ Forces are gathered in 64-bit fixed point (``state.FORCE_QUANTUM``), so a run is
 reproducible on any number of threads and in any batch.
 
 Energy: friction (slip), viscous (dashpots) go to the owner's ``body_energy`` row; the
-normal elastic energy of a contact is ``integral k_e A dA / L`` (exact for translation along
-the normal, where ``dA = L d(depth)``), accumulated from successive overlap areas.
+normal elastic energy of a contact is the work its elastic force ``k_e A`` has done on the
+approach, ``integral k_e A v_n dt``, so that the budget closes up to a residual that shrinks
+with dt (for translation along the normal it is ``integral k_e A dA / L``).
 """
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
@@ -86,11 +88,15 @@ def tangential_force(xi, slip_speed, dt, k_t, c_t, cap):
     damp_work = c_t * slip_speed * slip_speed * dt
     new_xi = trial
     if ti.abs(force) > cap:
-        # Slip: the spring holds exactly the cap; the rest of the displacement is sliding.
+        # Slip: the force is the cap and the spring-dashpot relaxes toward it over the step,
+        # -k_t new_xi - c_t (new_xi - xi) / dt = force (backward Euler), the rest of the
+        # displacement is sliding. (Setting new_xi = -force / k_t instead lets the dashpot's
+        # share of the trial force flip or over-stretch the spring by 2 mu F_n / k_t in one
+        # step, booking slip work that no force did: an energy error that dt does not shrink.)
         force = ti.math.sign(force) * cap
-        new_xi = -force / k_t
+        new_xi = (c_t * xi - force * dt) / (k_t * dt + c_t)
         slip_work = cap * ti.abs(trial - new_xi)
-        damp_work = 0.0
+        damp_work = c_t * (new_xi - xi) * (new_xi - xi) / dt
     return force, new_xi, slip_work, damp_work
 
 
@@ -101,14 +107,12 @@ class ContactStage:
     def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash, params: dict):
         """
         Args:
-            params: ``k_e`` (N/m^2), ``k_v`` (Pa s), ``k_t`` (N/m), ``c_t`` (N s/m),
-                ``method`` (friction.METHOD_* for theta).
+            params: ``k_e`` (N/m^2), ``k_v`` (Pa s), ``method`` (friction.METHOD_* for
+                theta). The tangential ``k_t``, ``c_t`` are per world (model.world_tangential).
         """
         self.layout, self.model, self.data, self.hash = layout, model, data, spatial_hash
         self.k_e = float(params["k_e"])
         self.k_v = float(params["k_v"])
-        self.k_t = float(params["k_t"])
-        self.c_t = float(params["c_t"])
         self.method = int(params.get("method", METHOD_EXPONENTIAL))
         self.maxv = layout.max_verts
         # Bodies whose bounding circles meet a body's: more than its slots are possible
@@ -157,11 +161,9 @@ class ContactStage:
                     if d.contact_partner[cur, i, s] == j:
                         found = s
                 xi = 0.0
-                area_prev = 0.0
                 elastic = 0.0
                 if found >= 0:
                     xi = d.contact_xi[cur, i, found]
-                    area_prev = d.contact_area[cur, i, found]
                     elastic = d.contact_elastic[cur, i, found]
                 r_i, r_j = point, point + (xi_ - xj_)  # point is relative to body i
                 v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
@@ -192,16 +194,18 @@ class ContactStage:
                     mu = m.world_mu[w]
 
                 f_t, xi_new, slip_work, damp_work = tangential_force(
-                    xi, slip, dt, self.k_t, self.c_t, mu * f_n
+                    xi, slip, dt, m.world_tangential[w, 0], m.world_tangential[w, 1], mu * f_n
                 )
                 force = f_n * normal + f_t * tangent  # on j; -force on i
                 self.add_force(j, force, cross2(r_j, force))
                 self.add_force(i, -force, -cross2(r_i, force))
 
-                # Elastic energy stored in the overlap: integral of k_e A dA / L.
-                elastic += (
-                    self.k_e * 0.5 * (area + area_prev) * (area - area_prev) / ti.max(width, 1e-9)
-                )
+                # Elastic energy stored in the contact: the work of its elastic force on the
+                # approach. (integral k_e A dA / L equals it only for relative translation;
+                # when the bodies turn, dA / dt = L v_n at the chord's middle, not at the
+                # centroid where the force acts, and the budget kept an error dt does not
+                # shrink.)
+                elastic += f_el * approach * dt
                 d.body_energy[i, BODY_FRICTION] += slip_work
                 d.body_energy[i, BODY_VISCOUS] += (f_n - f_el) * approach * dt + damp_work
 

@@ -4,7 +4,7 @@
 
 ``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
 of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water;
-``elastic`` what the overlaps (``integral k_e A dA / L``) and the tangential springs
+``elastic`` what the overlaps (``integral k_e A v_n dt``) and the tangential springs
 (``k_t xi^2 / 2``) hold now. The residual is the discretisation error of the explicit step
 and shrinks with dt. Each world is summed by one thread in body order, so the sums are
 reproducible.
@@ -36,9 +36,8 @@ from .state import (
 class EnergyMeter:
     """Fills ``data.world_energy`` on demand (at output times, not every step)."""
 
-    def __init__(self, layout: Layout, model: Model, data: Data, k_t: float):
+    def __init__(self, layout: Layout, model: Model, data: Data):
         self.layout, self.model, self.data = layout, model, data
-        self.k_t = float(k_t)
 
     @ti.kernel
     def snapshot(self, cur: ti.i32):
@@ -51,6 +50,7 @@ class EnergyMeter:
             viscous = ti.cast(0.0, ti.f64)
             drag = ti.cast(0.0, ti.f64)
             work = ti.cast(0.0, ti.f64)
+            k_t = ti.cast(m.world_tangential[w, 0], ti.f64)
             for i in range(m.world_body_start[w], m.world_body_start[w + 1]):
                 if m.body_kind[i] == KIND_DYNAMIC:
                     kinetic += 0.5 * ti.cast(
@@ -60,9 +60,7 @@ class EnergyMeter:
                     )
                 for s in range(d.contact_count[cur, i]):
                     xi = ti.cast(d.contact_xi[cur, i, s], ti.f64)
-                    elastic += (
-                        ti.cast(d.contact_elastic[cur, i, s], ti.f64) + 0.5 * self.k_t * xi * xi
-                    )
+                    elastic += ti.cast(d.contact_elastic[cur, i, s], ti.f64) + 0.5 * k_t * xi * xi
                 friction += d.body_energy[i, BODY_FRICTION]
                 viscous += d.body_energy[i, BODY_VISCOUS]
                 drag += d.body_energy[i, BODY_DRAG]

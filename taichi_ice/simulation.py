@@ -84,10 +84,20 @@ class Simulation:
         backend.init(arch, precision)
         first = scenes[0].simulation
         requested = dt if dt is not None else min(s.dt for s in scenes)
-        # Whole steps per output interval, so frames land on multiples of the interval.
-        self.frame_every = max(1, math.ceil(first.output_interval / requested * (1 - 1e-12)))
+        # Whole steps per output interval, so frames land on multiples of the interval; and
+        # when the series interval divides it (the usual case), whole steps per sample too,
+        # so samples land on multiples of theirs (and on every frame).
+        samples_per_frame = round(first.output_interval / first.series_interval)
+        if samples_per_frame >= 1 and math.isclose(
+            samples_per_frame * first.series_interval, first.output_interval, rel_tol=1e-9
+        ):
+            self.series_every = max(1, math.ceil(first.series_interval / requested * (1 - 1e-12)))
+            self.frame_every = samples_per_frame * self.series_every
+        else:
+            self.frame_every = max(1, math.ceil(first.output_interval / requested * (1 - 1e-12)))
+            self.series_every = 0
         self.dt = first.output_interval / self.frame_every
-        self.series_every = max(1, round(first.series_interval / self.dt))
+        self.series_every = self.series_every or max(1, round(first.series_interval / self.dt))
         self.world = World(scenes, dt=self.dt, precision=precision, slots=slots, force_dt=force_dt)
         # Kinetic and elastic energy at t = 0: the budget's starting capital.
         self.initial_energy = self.world.energies().copy()

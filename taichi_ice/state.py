@@ -30,6 +30,7 @@ body_probe           i32      N           probe index of the body, or -1
 vert_local           vec2     V           outline relative to the centroid, unrotated (m)
 world_mu             real     W           Coulomb friction coefficient of each world
 world_rate_state     real     W x 5       rate-and-state (A, B, mu0, v_star, t_c) per world
+world_tangential     real     W x 2       tangential spring k_t (N/m), dashpot c_t (N s/m)
 world_body_start     i32      W + 1       first body of each world (bodies are world-major)
 large_ids            i32      G           large bodies, world by world
 world_large_start    i32      W + 1       first large body of each world in ``large_ids``
@@ -157,6 +158,7 @@ class Model:
         self.vert_local = _vec_field(real, layout.n_verts)
         self.world_mu = _field(real, w)
         self.world_rate_state = _field(real, (w, 5))
+        self.world_tangential = _field(real, (w, 2))
         self.world_body_start = _field(ti.i32, w + 1)
         self.large_ids = _field(ti.i32, layout.n_large)
         self.world_large_start = _field(ti.i32, w + 1)
@@ -206,6 +208,7 @@ class HostArrays:
     vert_local: np.ndarray
     world_mu: np.ndarray
     world_rate_state: np.ndarray
+    world_tangential: np.ndarray
     world_body_start: np.ndarray
     large_ids: np.ndarray
     world_large_start: np.ndarray
@@ -243,6 +246,7 @@ def upload(model: Model, data: Data, host: HostArrays, real_np) -> None:
     put(model.vert_local, host.vert_local, real_np)
     put(model.world_mu, host.world_mu, real_np)
     put(model.world_rate_state, host.world_rate_state, real_np)
+    put(model.world_tangential, host.world_tangential, real_np)
     put(model.world_body_start, host.world_body_start, np.int32)
     put(model.large_ids, host.large_ids, np.int32)
     put(model.world_large_start, host.world_large_start, np.int32)

@@ -115,19 +115,17 @@ class World:
         self.data.time_step[None] = self.dt
 
         ice = first.ice
-        char_width = self._characteristic_width()
-        self.k_t = ice.tangential_stiffness * ice.contact_stiffness * char_width
+        # Tangential spring (N/m) and dashpot (N s/m) of each world (see _assemble).
+        self.k_t, self.c_t = host.world_tangential[:, 0], host.world_tangential[:, 1]
         params = {
             "k_e": ice.contact_stiffness,
             "k_v": ice.contact_viscosity,
-            "k_t": self.k_t,
-            "c_t": ice.tangential_stiffness * ice.contact_viscosity * char_width,
             "method": self._theta_method(),
         }
         self.hash = SpatialHash(self.layout, self.model, self.data)
         self.contacts = ContactStage(self.layout, self.model, self.data, self.hash, params)
         self.integrator = Integrator(self.layout, self.model, self.data, self._runaway_speed())
-        self.energy = EnergyMeter(self.layout, self.model, self.data, self.k_t)
+        self.energy = EnergyMeter(self.layout, self.model, self.data)
         self.cur = 0  # contact buffer holding the memory of the last step
         self.steps = 0
         self.time = 0.0
@@ -224,14 +222,15 @@ class World:
         law = self.scenes[0].friction
         return method_code(law.method) if isinstance(law, RateState) else METHOD_EXPONENTIAL
 
-    def _characteristic_width(self) -> float:
-        """Longest edge of any dynamic body (m): the widest contact that sets the stiffness."""
+    @staticmethod
+    def _characteristic_width(scene) -> float:
+        """Longest edge of any dynamic body of a scene (m): the widest contact, which sets the
+        tangential stiffness. Per world, so that a world runs the same alone or in a batch."""
         width = 0.0
-        for s in self.scenes:
-            for b in s.bodies:
-                if b.kind == "dynamic":
-                    e = np.roll(b.vertices, -1, axis=0) - b.vertices
-                    width = max(width, float(np.max(np.hypot(e[:, 0], e[:, 1]))))
+        for b in scene.bodies:
+            if b.kind == "dynamic":
+                e = np.roll(b.vertices, -1, axis=0) - b.vertices
+                width = max(width, float(np.max(np.hypot(e[:, 0], e[:, 1]))))
         return width if width > 0 else 1.0
 
     def _runaway_speed(self) -> float:
@@ -266,12 +265,19 @@ class World:
         verts: list[np.ndarray] = []
         mu = np.zeros(len(self.scenes))
         rate_state = np.zeros((len(self.scenes), 5))
+        tangential = np.zeros((len(self.scenes), 2))
         n_probe = 0
         for w, s in enumerate(self.scenes):
             if isinstance(s.friction, RateState):
                 rate_state[w] = s.friction.params
             else:
                 mu[w] = s.friction.mu
+            width = self._characteristic_width(s)
+            ratio = s.ice.tangential_stiffness
+            tangential[w] = (
+                ratio * s.ice.contact_stiffness * width,
+                ratio * s.ice.contact_viscosity * width,
+            )
             masses, inertias = s.masses, s.inertias
             for i, b in enumerate(s.bodies):
                 v = np.asarray(b.vertices, dtype=np.float64)
@@ -338,6 +344,7 @@ class World:
             vert_local=np.concatenate(verts) if verts else np.zeros((0, 2)),
             world_mu=mu,
             world_rate_state=rate_state,
+            world_tangential=tangential,
             world_body_start=world_body_start,
             large_ids=large_ids,
             world_large_start=world_large_start,

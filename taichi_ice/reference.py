@@ -1,0 +1,541 @@
+"""NumPy twins of the contact stage and of a whole step: slow, plain loops, for tiny scenes.
+
+The kernels (``contact.ContactStage``, ``integrate.Integrator``, ``energy.EnergyMeter``) are
+held against this module in the tests. It writes the same algorithm one pair and one body at
+a time, in float64, from the same equations:
+
+- :func:`contact_force_np`: one pair, owner ``i`` and partner ``j``. The Hopkins (1992)
+  overlap of the two outlines (``geometry.overlap``: area ``A``, contact point, normal from
+  ``i`` into ``j``, width ``L``); the velocity of ``j`` relative to ``i`` at the contact
+  point, split into the approach speed ``v_n`` and the slip ``v_t``; the normal force
+  ``F_n = max(k_e A + k_v L v_n, 0)``; the tangential stick spring ``k_t`` and dashpot
+  ``c_t`` on the stretch ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979); ``mu`` from
+  Coulomb, or rate-and-state with ``theta`` started in equilibrium at the first slip rate;
+  the stored elastic energy grows by the elastic force's work on the approach.
+- :func:`reference_step`: every owned pair of every world, forces gathered in the same
+  fixed point as the kernels (``state.FORCE_QUANTUM``, truncated toward zero), then
+  semi-implicit Euler with water drag (``drag.water_drag_np``) and external forces; fixed
+  bodies stay, kinematic ones move at their velocity. Contact memory (``xi``, last area,
+  stored elastic energy, ``theta``) is a dict keyed by the ordered pair ``(owner, partner)``
+  and dropped when the pair no longer overlaps.
+- :func:`reference_energies`: the energy terms of each world, as ``World.energies``.
+
+Pairs are found by testing every pair of a world (no spatial hash), so the cost is quadratic:
+a few bodies and tens of steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
+
+import numpy as np
+
+from .drag import drag_coefficients, water_drag_np
+from .friction import (
+    METHOD_EXPONENTIAL,
+    Coulomb,
+    RateState,
+    method_code,
+    rate_state_mu_np,
+    slip_log_np,
+    theta_equilibrium_np,
+    theta_step_np,
+)
+from .geometry import overlap
+from .state import (
+    BODY_DRAG,
+    BODY_ENERGY_COUNT,
+    BODY_FRICTION,
+    BODY_VISCOUS,
+    BODY_WORK,
+    ENERGY_COUNT,
+    ENERGY_DRAG,
+    ENERGY_ELASTIC,
+    ENERGY_FRICTION,
+    ENERGY_KINETIC,
+    ENERGY_VISCOUS,
+    ENERGY_WORK_IN,
+    FORCE_QUANTUM,
+    KIND_DYNAMIC,
+    KIND_KINEMATIC,
+    KIND_NAMES,
+)
+
+__all__ = [
+    "ContactForce",
+    "ContactMemory",
+    "ReferenceModel",
+    "ReferenceState",
+    "contact_force_np",
+    "normal_force_np",
+    "outline_np",
+    "owns",
+    "reference_energies",
+    "reference_step",
+    "tangential_force_np",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# One contact
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ContactMemory:
+    """What a contact carries from one step to the next (one kernel contact slot).
+
+    Attributes:
+        xi: tangential spring stretch along the tangent (m).
+        area: overlap area at the last step (m^2).
+        elastic: normal elastic energy stored in the overlap (J).
+        theta: rate-and-state variable (0 for Coulomb).
+    """
+
+    xi: float = 0.0
+    area: float = 0.0
+    elastic: float = 0.0
+    theta: float = 0.0
+
+
+class ContactForce(NamedTuple):
+    """One contact of one step, as the kernel evaluates it.
+
+    Attributes:
+        area: overlap area (m^2). point: ``(2,)`` contact point (m). normal: ``(2,)`` unit
+            normal from the owner into the partner. width: contact width ``L`` (m).
+            kind: ``geometry.OVERLAP_*``.
+        approach: approach speed along the normal (m/s), positive when closing.
+        slip: tangential velocity of the partner relative to the owner (m/s), along
+            ``tangent = (-normal_y, normal_x)``.
+        mu: friction coefficient used. normal_force: ``F_n`` (N), clamped at 0.
+        elastic_force: ``k_e A`` (N). tangential_force: along the tangent, on the partner (N).
+        force: ``(2,)`` total force on the partner (N); the owner gets ``-force``.
+        torque_owner, torque_partner: about each centroid (N m).
+        memory: the contact's new memory (stretch, area, stored elastic energy, theta).
+        slip_work: frictional work of the step (J). viscous_work: dashpot work (J).
+    """
+
+    area: float
+    point: np.ndarray
+    normal: np.ndarray
+    width: float
+    kind: int
+    approach: float
+    slip: float
+    mu: float
+    normal_force: float
+    elastic_force: float
+    tangential_force: float
+    force: np.ndarray
+    torque_owner: float
+    torque_partner: float
+    memory: ContactMemory
+    slip_work: float
+    viscous_work: float
+
+
+def _cross(a, b) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _spin(omega: float, r) -> np.ndarray:
+    """omega (z) x r: velocity of a point at ``r`` on a body spinning at ``omega``."""
+    return np.array([-omega * r[1], omega * r[0]])
+
+
+def normal_force_np(area, width, approach_speed, k_e, k_v) -> tuple[float, float]:
+    """NumPy twin of ``contact.normal_force``: ``(max(k_e A + k_v L v_n, 0), k_e A)`` in N."""
+    elastic = k_e * area
+    return max(elastic + k_v * width * approach_speed, 0.0), elastic
+
+
+def tangential_force_np(xi, slip_speed, dt, k_t, c_t, cap) -> tuple[float, float, float, float]:
+    """NumPy twin of ``contact.tangential_force``: stick spring-dashpot capped at ``cap``.
+
+    Returns:
+        (force on the partner along the tangent (N), new stretch (m), frictional work (J),
+        dashpot work (J)) of the step.
+    """
+    trial = xi + slip_speed * dt
+    force = -k_t * trial - c_t * slip_speed
+    slip_work = 0.0
+    damp_work = c_t * slip_speed * slip_speed * dt
+    new_xi = trial
+    if abs(force) > cap:
+        # Slip: the force is the cap; the spring-dashpot relaxes toward it (backward Euler).
+        force = math.copysign(cap, force)
+        new_xi = (c_t * xi - force * dt) / (k_t * dt + c_t)
+        slip_work = cap * abs(trial - new_xi)
+        damp_work = c_t * (new_xi - xi) * (new_xi - xi) / dt
+    return force, new_xi, slip_work, damp_work
+
+
+def contact_force_np(
+    p: np.ndarray,
+    q: np.ndarray,
+    pos_owner,
+    vel_owner,
+    omega_owner: float,
+    pos_partner,
+    vel_partner,
+    omega_partner: float,
+    *,
+    dt: float,
+    k_e: float,
+    k_v: float,
+    k_t: float,
+    c_t: float,
+    law: Coulomb | RateState,
+    memory: ContactMemory | None = None,
+    method: int | None = None,
+) -> ContactForce | None:
+    """NumPy twin of ``ContactStage.pair``: the contact between an owner and a partner.
+
+    The outlines and centroids may be given in any frame, the same for all four; the
+    kernel takes the owner's centroid as the origin (``outline_np``), which keeps float32
+    accurate far from the world origin.
+
+    Args:
+        p: ``(n, 2)`` outline of the owner (m), counter-clockwise.
+        q: ``(m, 2)`` outline of the partner (m), in the frame of ``p``.
+        pos_owner, vel_owner, omega_owner: centroid (m) in that frame, velocity (m/s), spin
+            (rad/s).
+        pos_partner, vel_partner, omega_partner: likewise for the partner.
+        dt: time step (s). k_e: N/m^2. k_v: Pa s. k_t: N/m. c_t: N s/m.
+        law: the world's friction law.
+        memory: the contact's memory from the last step, or None for a new contact.
+        method: ``friction.METHOD_*`` for theta; default the law's own method.
+
+    Returns:
+        A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
+        outlines do not overlap.
+    """
+    ov = overlap(p, q)
+    if not ov.area > 0.0:
+        return None
+    area, point, normal, width = ov.area, ov.centroid, ov.normal, ov.width
+    r_i = point - np.asarray(pos_owner, dtype=np.float64)
+    r_j = point - np.asarray(pos_partner, dtype=np.float64)
+    v_rel = (np.asarray(vel_partner, dtype=np.float64) + _spin(omega_partner, r_j)) - (
+        np.asarray(vel_owner, dtype=np.float64) + _spin(omega_owner, r_i)
+    )
+    tangent = np.array([-normal[1], normal[0]])
+    approach = -float(v_rel @ normal)
+    slip = float(v_rel @ tangent)
+    f_n, f_el = normal_force_np(area, width, approach, k_e, k_v)
+
+    old = memory if memory is not None else ContactMemory()
+    theta_new = 0.0
+    if isinstance(law, RateState):
+        a_, b_, mu0, v_star, t_c = law.params
+        code = method_code(law.method) if method is None else method
+        x = float(slip_log_np(abs(slip), v_star))
+        theta = old.theta if memory is not None else float(theta_equilibrium_np(x, b_))
+        mu = float(rate_state_mu_np(theta, x, a_, mu0))
+        theta_new = float(theta_step_np(theta, x, x, x, dt, b_, t_c, code))
+    else:
+        mu = float(law.mu)
+
+    f_t, xi_new, slip_work, damp_work = tangential_force_np(old.xi, slip, dt, k_t, c_t, mu * f_n)
+    force = f_n * normal + f_t * tangent
+    # Elastic energy stored in the contact: the work of its elastic force on the approach.
+    elastic = old.elastic + f_el * approach * dt
+    viscous = (f_n - f_el) * approach * dt + damp_work
+    return ContactForce(
+        area=area,
+        point=point,
+        normal=normal,
+        width=width,
+        kind=ov.kind,
+        approach=approach,
+        slip=slip,
+        mu=mu,
+        normal_force=f_n,
+        elastic_force=f_el,
+        tangential_force=f_t,
+        force=force,
+        torque_owner=-_cross(r_i, force),
+        torque_partner=_cross(r_j, force),
+        memory=ContactMemory(xi=xi_new, area=area, elastic=elastic, theta=theta_new),
+        slip_work=slip_work,
+        viscous_work=viscous,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# A whole step
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ReferenceModel:
+    """Static data of a batch of worlds, as ``World`` assembles it (bodies world-major).
+
+    Attributes:
+        kind: ``(N,)`` ``state.KIND_*`` codes. world: ``(N,)`` world index.
+        mass: ``(N,)`` kg. inertia: ``(N,)`` kg m^2. vertices: N outlines ``(n, 2)``
+            relative to the centroid, unrotated (m). force_ext: ``(N, 2)`` N.
+        drag: ``(N, 2)`` water drag coefficients (kg/m, kg m^2), or None with no water.
+        laws: the friction law of each world.
+        k_e (N/m^2), k_v (Pa s): normal contact parameters. k_t (N/m), c_t (N s/m): ``(W,)``
+            tangential spring and dashpot of each world.
+        method: ``friction.METHOD_*`` for theta (the first world's law, as in ``World``).
+        quantum: force resolution of the gather (N); None sums in floating point.
+    """
+
+    kind: np.ndarray
+    world: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    vertices: tuple[np.ndarray, ...]
+    force_ext: np.ndarray
+    drag: np.ndarray | None
+    laws: tuple
+    k_e: float
+    k_v: float
+    k_t: np.ndarray
+    c_t: np.ndarray
+    method: int = METHOD_EXPONENTIAL
+    quantum: float | None = FORCE_QUANTUM
+
+    @property
+    def n_bodies(self) -> int:
+        return len(self.kind)
+
+    @classmethod
+    def from_scenes(cls, scenes: Sequence, quantum: float | None = FORCE_QUANTUM):
+        """The model of ``World(scenes)``: same parameters, derived the same way.
+
+        The tangential spring and dashpot of a world scale with the longest edge of its
+        dynamic bodies (``k_t = tangential_stiffness k_e L_max``), as ``World`` takes them.
+        """
+        scenes = list(scenes)
+        ice = scenes[0].ice
+        kind, world, mass, inertia, verts, force, drag = [], [], [], [], [], [], []
+        k_t, c_t = [], []
+        for w, s in enumerate(scenes):
+            longest = 0.0
+            for i, b in enumerate(s.bodies):
+                v = np.asarray(b.vertices, dtype=np.float64)
+                kind.append(KIND_NAMES[b.kind])
+                world.append(w)
+                mass.append(float(s.masses[i]))
+                inertia.append(float(s.inertias[i]))
+                verts.append(v)
+                force.append(np.asarray(b.force, dtype=np.float64))
+                if b.kind == "dynamic":
+                    e = np.roll(v, -1, axis=0) - v
+                    longest = max(longest, float(np.max(np.hypot(e[:, 0], e[:, 1]))))
+                if s.water is not None:
+                    area = s.masses[i] / (s.ice.density * s.ice.thickness)
+                    drag.append(
+                        drag_coefficients(
+                            area,
+                            s.ice.thickness,
+                            s.ice.density,
+                            s.water.density,
+                            s.water.form_drag,
+                            s.water.skin_drag,
+                        )
+                    )
+            width = longest if longest > 0 else 1.0
+            k_t.append(s.ice.tangential_stiffness * s.ice.contact_stiffness * width)
+            c_t.append(s.ice.tangential_stiffness * s.ice.contact_viscosity * width)
+        law0 = scenes[0].friction
+        return cls(
+            kind=np.array(kind, dtype=np.int32),
+            world=np.array(world, dtype=np.int32),
+            mass=np.array(mass),
+            inertia=np.array(inertia),
+            vertices=tuple(verts),
+            force_ext=np.array(force).reshape(-1, 2),
+            drag=np.array(drag).reshape(-1, 2) if scenes[0].water is not None else None,
+            laws=tuple(s.friction for s in scenes),
+            k_e=ice.contact_stiffness,
+            k_v=ice.contact_viscosity,
+            k_t=np.array(k_t),
+            c_t=np.array(c_t),
+            method=method_code(law0.method) if isinstance(law0, RateState) else 0,
+            quantum=quantum,
+        )
+
+
+@dataclass
+class ReferenceState:
+    """Mutable state of a batch: bodies, contact memory and cumulative energy terms.
+
+    Attributes:
+        pos: ``(N, 2)`` m. angle: ``(N,)`` rad. vel: ``(N, 2)`` m/s. omega: ``(N,)`` rad/s.
+        contacts: ``{(owner, partner): ContactMemory}`` of the contacts of the last step.
+        body_energy: ``(N, 4)`` cumulative terms per body (J), ``state.BODY_*`` columns.
+        time: s.
+    """
+
+    pos: np.ndarray
+    angle: np.ndarray
+    vel: np.ndarray
+    omega: np.ndarray
+    contacts: dict[tuple[int, int], ContactMemory] = field(default_factory=dict)
+    body_energy: np.ndarray | None = None
+    time: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.body_energy is None:
+            self.body_energy = np.zeros((len(self.angle), BODY_ENERGY_COUNT))
+
+    @classmethod
+    def from_scenes(cls, scenes: Sequence) -> ReferenceState:
+        """The initial state of ``World(scenes)``."""
+        scenes = list(scenes)
+        return cls(
+            pos=np.concatenate([np.asarray(s.positions, dtype=np.float64) for s in scenes]),
+            angle=np.concatenate([np.asarray(s.angles, dtype=np.float64) for s in scenes]),
+            vel=np.concatenate([np.asarray(s.velocities, dtype=np.float64) for s in scenes]),
+            omega=np.concatenate([np.asarray(s.omegas, dtype=np.float64) for s in scenes]),
+        )
+
+    def copy(self) -> ReferenceState:
+        return replace(
+            self,
+            pos=self.pos.copy(),
+            angle=self.angle.copy(),
+            vel=self.vel.copy(),
+            omega=self.omega.copy(),
+            contacts=dict(self.contacts),
+            body_energy=self.body_energy.copy(),
+        )
+
+
+def owns(kind: np.ndarray, i: int, j: int) -> bool:
+    """True if body i handles the pair (i, j): the dynamic one, or the lower id of two."""
+    dyn_i, dyn_j = kind[i] == KIND_DYNAMIC, kind[j] == KIND_DYNAMIC
+    return bool((dyn_i and not dyn_j) or (dyn_i and dyn_j and i < j))
+
+
+def outline_np(model: ReferenceModel, state: ReferenceState, i: int, origin=(0.0, 0.0)):
+    """``(n, 2)`` outline of body i relative to ``origin`` (m), as ``ContactStage.outline``.
+
+    Same operations in the same order as the kernel: ``(x - origin) + R v``.
+    """
+    c, s = math.cos(state.angle[i]), math.sin(state.angle[i])
+    x = state.pos[i] - np.asarray(origin, dtype=np.float64)
+    v = model.vertices[i]
+    return np.stack([x[0] + c * v[:, 0] - s * v[:, 1], x[1] + s * v[:, 0] + c * v[:, 1]], axis=1)
+
+
+def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> ReferenceState:
+    """One step of every world, as ``World.step`` takes it; returns the new state.
+
+    Contacts: every ordered pair (owner, partner) of a world, in body order, through
+    :func:`contact_force_np`; forces and torques are gathered in fixed point of
+    ``model.quantum`` (each contribution truncated toward zero, as the kernel's cast does),
+    or in floating point if ``model.quantum`` is None. Then semi-implicit Euler:
+    ``v += dt (F + F_ext + F_drag(v)) / m``, ``x += dt v`` (and the angle likewise).
+    """
+    n = model.n_bodies
+    new = state.copy()
+    exact = model.quantum is None
+    force_sum = np.zeros((n, 2)) if exact else [[0, 0] for _ in range(n)]
+    torque_sum = np.zeros(n) if exact else [0] * n
+    scale = None if exact else 1.0 / model.quantum
+
+    def gather(k: int, f: np.ndarray, tau: float) -> None:
+        if exact:
+            force_sum[k] += f
+            torque_sum[k] += tau
+        else:
+            # float -> int truncates toward zero, like ti.cast(x, ti.i64).
+            force_sum[k][0] += int(f[0] * scale)
+            force_sum[k][1] += int(f[1] * scale)
+            torque_sum[k] += int(tau * scale)
+
+    contacts: dict[tuple[int, int], ContactMemory] = {}
+    for i in range(n):
+        for j in range(n):
+            if i == j or model.world[i] != model.world[j] or not owns(model.kind, i, j):
+                continue
+            # In the owner's frame, as the kernel clips.
+            origin = state.pos[i]
+            c = contact_force_np(
+                outline_np(model, state, i, origin),
+                outline_np(model, state, j, origin),
+                np.zeros(2),
+                state.vel[i],
+                state.omega[i],
+                state.pos[j] - origin,
+                state.vel[j],
+                state.omega[j],
+                dt=dt,
+                k_e=model.k_e,
+                k_v=model.k_v,
+                k_t=float(model.k_t[model.world[i]]),
+                c_t=float(model.c_t[model.world[i]]),
+                law=model.laws[model.world[i]],
+                memory=state.contacts.get((i, j)),
+                method=model.method,
+            )
+            if c is None:
+                continue  # no overlap: the pair's memory is dropped
+            gather(j, c.force, c.torque_partner)
+            gather(i, -c.force, c.torque_owner)
+            new.body_energy[i, BODY_FRICTION] += c.slip_work
+            new.body_energy[i, BODY_VISCOUS] += c.viscous_work
+            contacts[(i, j)] = c.memory
+    new.contacts = contacts
+
+    for i in range(n):
+        if exact:
+            f, tau = force_sum[i], float(torque_sum[i])
+        else:
+            f = np.array([float(force_sum[i][0]), float(force_sum[i][1])]) * model.quantum
+            tau = float(torque_sum[i]) * model.quantum
+        if model.kind[i] == KIND_DYNAMIC:
+            v0, w0 = state.vel[i], float(state.omega[i])
+            f_drag, t_drag = np.zeros(2), 0.0
+            if model.drag is not None:
+                fd, td = water_drag_np(
+                    v0[None, :], np.array([w0]), model.drag[i, 0:1], model.drag[i, 1:2]
+                )
+                f_drag, t_drag = fd[0], float(td[0])
+            f_ext = model.force_ext[i]
+            v1 = v0 + dt * (1.0 / model.mass[i]) * (f + f_ext + f_drag)
+            w1 = w0 + dt * (1.0 / model.inertia[i]) * (tau + t_drag)
+            vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
+            new.body_energy[i, BODY_DRAG] += -(float(f_drag @ vm) + t_drag * wm) * dt
+            new.body_energy[i, BODY_WORK] += float(f_ext @ vm) * dt
+            new.vel[i] = v1
+            new.omega[i] = w1
+            new.pos[i] = state.pos[i] + dt * v1
+            new.angle[i] = state.angle[i] + dt * w1
+        elif model.kind[i] == KIND_KINEMATIC:
+            v, w = state.vel[i], float(state.omega[i])
+            new.body_energy[i, BODY_WORK] += -(float(f @ v) + tau * w) * dt
+            new.pos[i] = state.pos[i] + dt * v
+            new.angle[i] = state.angle[i] + dt * w
+    new.time = state.time + dt
+    return new
+
+
+def reference_energies(state: ReferenceState, model: ReferenceModel) -> np.ndarray:
+    """``(W, ENERGY_COUNT)`` energy terms of each world (J), ``state.ENERGY_*`` columns."""
+    n_worlds = int(model.world.max()) + 1 if model.n_bodies else 0
+    out = np.zeros((n_worlds, ENERGY_COUNT))
+    for i in range(model.n_bodies):
+        w = model.world[i]
+        if model.kind[i] == KIND_DYNAMIC:
+            out[w, ENERGY_KINETIC] += 0.5 * (
+                model.mass[i] * float(state.vel[i] @ state.vel[i])
+                + model.inertia[i] * state.omega[i] ** 2
+            )
+        out[w, ENERGY_FRICTION] += state.body_energy[i, BODY_FRICTION]
+        out[w, ENERGY_VISCOUS] += state.body_energy[i, BODY_VISCOUS]
+        out[w, ENERGY_DRAG] += state.body_energy[i, BODY_DRAG]
+        out[w, ENERGY_WORK_IN] += state.body_energy[i, BODY_WORK]
+    for (i, _j), mem in state.contacts.items():
+        w = model.world[i]
+        out[w, ENERGY_ELASTIC] += mem.elastic + 0.5 * model.k_t[w] * mem.xi**2
+    return out

@@ -1,0 +1,465 @@
+"""The contact stage: forces and memory against their NumPy twin, pairs against brute force.
+
+- ``reference.contact_force_np`` (overlap from ``geometry.overlap``, itself held against
+  shapely) against the kernel on seeded random overlapping pairs, new and remembered.
+- The spatial hash finds exactly the overlapping pairs of an all-pairs search, never across
+  worlds of a batch.
+- Rate-and-state memory: theta persists through a contact and restarts in equilibrium
+  for a new one; more contacts than slots is an error, never silent.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from taichi_ice import CapacityError, Simulation
+from taichi_ice.friction import Coulomb, RateState
+from taichi_ice.geometry import OVERLAP_FALLBACK, check_polygon, overlap, sat_separated, transform
+from taichi_ice.io import read_run
+from taichi_ice.reference import (
+    ReferenceModel,
+    ReferenceState,
+    contact_force_np,
+    outline_np,
+    owns,
+)
+from taichi_ice.scenario import scene_from_dict
+from taichi_ice.state import BODY_FRICTION, BODY_VISCOUS, FORCE_QUANTUM, STATUS_SLOT_OVERFLOW
+from taichi_ice.world import World
+
+SEED = 20240612
+N_PAIRS = 160  # one two-body world each; four in five overlap
+
+# Same formulas in the same order; what differs is LLVM's and NumPy's rounding of the clip
+# (geometry's Taichi-vs-NumPy tolerance is 1e-12 relative), carried into forces ~1e4 N.
+TWIN_RTOL = 1e-10
+# Each force component is truncated to 2^-24 N once per pair in the kernel and in the twin;
+# round-off can move it across one step of that fixed point.
+FORCE_ATOL = 2 * FORCE_QUANTUM  # N (and N m for torques)
+# theta against its exponential update from the slip the test computes: round-off of the
+# slip rate (float32: its 1e-7) through ln(V / V*).
+THETA_RTOL = {"f64": 1e-9, "f32": 1e-5}
+
+KIND_PAIRS = (
+    ("dynamic", "dynamic"),
+    ("dynamic", "fixed"),
+    ("fixed", "dynamic"),
+    ("kinematic", "dynamic"),
+    ("dynamic", "kinematic"),
+)
+
+
+@pytest.fixture(scope="module")
+def f64(taichi_runtime: tuple[str, str]) -> None:
+    """Skip tolerances that only float64 meets."""
+    if taichi_runtime[1] != "f64":
+        pytest.skip("needs float64 (tolerances near round-off)")
+
+
+@pytest.fixture(scope="module")
+def run_opts(taichi_runtime: tuple[str, str]) -> dict:
+    arch, precision = taichi_runtime
+    return {"arch": arch, "precision": precision}
+
+
+def random_quad(rng: np.random.Generator) -> np.ndarray:
+    """A strictly convex counter-clockwise quadrilateral on a random ellipse (m)."""
+    while True:
+        angles = np.sort(rng.uniform(0.0, 2.0 * np.pi, 4))
+        gaps = np.diff(np.append(angles, angles[0] + 2.0 * np.pi))
+        if gaps.min() > 0.4:
+            break
+    semi = rng.uniform(0.25, 0.7, 2)
+    return check_polygon(np.stack([semi[0] * np.cos(angles), semi[1] * np.sin(angles)], 1))
+
+
+def pair_scenes(rng: np.random.Generator, law) -> tuple[list, np.ndarray, np.ndarray]:
+    """Two-body scenes (laid apart, as scene files must be) and the overlapping placements.
+
+    Returns:
+        (scenes, positions (2B, 2), angles (2B,)): the second body of each pair is slid
+        toward the first until the outlines touch, then pushed in by up to 5 cm (or, for one
+        pair in five, held 1-5 mm apart).
+    """
+    scenes, pos, ang = [], [], []
+    for b in range(N_PAIRS):
+        kinds = KIND_PAIRS[b % len(KIND_PAIRS)]
+        bodies = []
+        for k, kind in enumerate(kinds):
+            body = {
+                "name": f"p{k}",
+                "kind": kind,
+                "shape": "polygon",
+                "vertices": random_quad(rng).tolist(),
+                "position": [30.0 * k, 0.0],
+            }
+            if kind != "fixed":
+                body["velocity"] = rng.uniform(-1.0, 1.0, 2).tolist()
+                body["omega"] = float(rng.uniform(-2.0, 2.0))
+            bodies.append(body)
+        scene = scene_from_dict(
+            {"simulation": {"duration": 1.0}, "friction": law.to_dict(), "body": bodies}
+        )
+        a = rng.uniform(0.0, 2.0 * np.pi, 2)
+        p = transform(scene.bodies[0].vertices, [0.0, 0.0], a[0])
+        q0 = transform(scene.bodies[1].vertices, [0.0, 0.0], a[1])
+        direction = np.array([math.cos(t := rng.uniform(0, 2 * np.pi)), math.sin(t)])
+        lo, hi = 0.0, 3.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if sat_separated(p, q0 + mid * direction) else (mid, hi)
+        push = -rng.uniform(1e-3, 5e-3) if b % 5 == 4 else rng.uniform(1e-4, 5e-2)
+        centre = rng.uniform(-3.0, 3.0, 2)  # pairs of different worlds overlap in space
+        pos += [centre, centre + (hi - push) * direction]
+        ang += [a[0], a[1]]
+        scenes.append(scene)
+    return scenes, np.array(pos), np.array(ang)
+
+
+def kernel_contacts(world: World, buffer: int) -> dict:
+    """``{(owner, partner): (xi, area, elastic, theta)}`` from one contact buffer."""
+    d = world.data
+    count = d.contact_count.to_numpy()[buffer]
+    partner = d.contact_partner.to_numpy()[buffer]
+    xi, area = d.contact_xi.to_numpy()[buffer], d.contact_area.to_numpy()[buffer]
+    elastic = d.contact_elastic.to_numpy()[buffer]
+    theta = d.contact_theta.to_numpy()[buffer] if world.layout.rate_state else None
+    out = {}
+    for i in range(world.layout.n_bodies):
+        for s in range(count[i]):
+            th = float(theta[i, s]) if theta is not None else 0.0
+            out[(i, int(partner[i, s]))] = (
+                float(xi[i, s]),
+                float(area[i, s]),
+                float(elastic[i, s]),
+                th,
+            )
+    return out
+
+
+@pytest.mark.parametrize("law", [Coulomb(0.4), RateState()], ids=["coulomb", "rate-state"])
+def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
+    """Force, torque, memory and dissipation of one contact match the NumPy twin, twice."""
+    rng = np.random.default_rng(SEED)
+    scenes, pos, ang = pair_scenes(rng, law)
+    world = World(scenes)
+    model = ReferenceModel.from_scenes(scenes)
+    d = world.data
+    vel = np.asarray(d.body_vel.to_numpy(), dtype=np.float64)
+    omega = np.asarray(d.body_omega.to_numpy(), dtype=np.float64)
+    state = ReferenceState(pos=pos, angle=ang, vel=vel, omega=omega)
+    memory: dict = {}
+    seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0}
+    worst = 0.0  # largest force difference (N)
+    for step in range(2):
+        d.body_pos.from_numpy(state.pos)
+        d.body_angle.from_numpy(state.angle)
+        d.body_force_q.fill(0)
+        d.body_torque_q.fill(0)
+        d.body_energy.fill(0.0)
+        world.hash.build()
+        world.contacts.compute(step)
+        force_q = d.body_force_q.to_numpy()
+        torque_q = d.body_torque_q.to_numpy()
+        energy = d.body_energy.to_numpy()
+        contacts = kernel_contacts(world, 1 - step)
+        expected = {}
+        for w in range(N_PAIRS):
+            a, b = 2 * w, 2 * w + 1
+            i, j = (a, b) if owns(model.kind, a, b) else (b, a)
+            origin = state.pos[i]
+            c = contact_force_np(
+                outline_np(model, state, i, origin),
+                outline_np(model, state, j, origin),
+                np.zeros(2),
+                state.vel[i],
+                state.omega[i],
+                state.pos[j] - origin,
+                state.vel[j],
+                state.omega[j],
+                dt=world.dt,
+                k_e=model.k_e,
+                k_v=model.k_v,
+                k_t=float(model.k_t[w]),
+                c_t=float(model.c_t[w]),
+                law=law,
+                memory=memory.get((i, j)),
+            )
+            if c is None:
+                for k in (i, j):
+                    assert np.all(force_q[k] == 0) and torque_q[k] == 0
+                continue
+            expected[(i, j)] = c.memory
+            seen["slip" if abs(c.tangential_force) >= c.mu * c.normal_force else "stick"] += 1
+            seen["fallback"] += c.kind == OVERLAP_FALLBACK
+            seen["remembered"] += (i, j) in memory
+            scale = np.linalg.norm(c.force)
+            for k, f, tau, r in (
+                (j, c.force, c.torque_partner, c.point - (state.pos[j] - origin)),
+                (i, -c.force, c.torque_owner, c.point),
+            ):
+                got = force_q[k] * FORCE_QUANTUM
+                worst = max(worst, float(np.max(np.abs(got - f))))
+                tol = TWIN_RTOL * scale + FORCE_ATOL
+                assert np.all(np.abs(got - f) <= tol), (step, w, got, f)
+                tol_tau = TWIN_RTOL * scale * np.linalg.norm(r) + FORCE_ATOL
+                assert abs(torque_q[k] * FORCE_QUANTUM - tau) <= tol_tau, (step, w)
+            assert energy[i, BODY_FRICTION] == pytest.approx(c.slip_work, rel=1e-8, abs=1e-12)
+            assert energy[i, BODY_VISCOUS] == pytest.approx(c.viscous_work, rel=1e-8, abs=1e-12)
+        assert set(contacts) == set(expected)
+        for key, (xi, area, elastic, theta) in contacts.items():
+            want = expected[key]
+            assert xi == pytest.approx(want.xi, rel=1e-8, abs=1e-15)
+            assert area == pytest.approx(want.area, rel=TWIN_RTOL)
+            assert elastic == pytest.approx(want.elastic, rel=1e-8, abs=1e-12)
+            assert theta == pytest.approx(want.theta, rel=TWIN_RTOL, abs=1e-15)
+        memory = expected
+        # Half a millisecond later, without the forces: the same pairs, most still touching.
+        state.pos = state.pos + 5e-4 * state.vel
+        state.angle = state.angle + 5e-4 * state.omega
+    print(f"{seen}; largest force difference {worst / FORCE_QUANTUM:.0f} x 2^-24 N")
+    assert seen["slip"] > 20 and seen["stick"] > 20 and seen["remembered"] > 50
+    assert seen["fallback"] > 0
+
+
+# --------------------------------------------------------------------------------------------
+# Broad phase
+# --------------------------------------------------------------------------------------------
+
+
+def dense_field_scene(seed: int) -> dict:
+    """A 12 x 20 field of blocks and two long walls (moved into place after set-up)."""
+    return {
+        "simulation": {"duration": 1.0, "seed": seed},
+        "body": [
+            {
+                "name": "wall_a",
+                "kind": "fixed",
+                "shape": "rectangle",
+                "width": 12.0,
+                "length": 0.4,
+                "position": [5.0, -5.0],
+            },
+            {
+                "name": "wall_b",
+                "kind": "fixed",
+                "shape": "rectangle",
+                "width": 0.4,
+                "length": 12.0,
+                "position": [-5.0, 5.0],
+            },
+        ],
+        "field": [
+            {
+                "shape": "diamond",
+                "width": 0.5,
+                "length": 0.6,
+                "rows": 12,
+                "columns": 10,
+                "origin": [0.0, 0.0],
+                "spacing": [0.8, 0.8],
+                "jitter": 0.05,
+            },
+            {
+                "shape": "rectangle",
+                "width": 0.4,
+                "length": 0.3,
+                "rows": 12,
+                "columns": 10,
+                "origin": [0.0, 10.0],
+                "spacing": [0.8, 0.8],
+                "jitter": 0.05,
+            },
+        ],
+    }
+
+
+def all_overlapping_pairs(outlines: list[np.ndarray], dynamic: np.ndarray) -> set:
+    """Every unordered pair (at least one dynamic) whose outlines overlap with positive area.
+
+    All pairs are tested; a bounding-circle test (a circle holds its polygon, so it can only
+    drop pairs that cannot overlap) picks those worth clipping.
+    """
+    centre = np.array([o.mean(axis=0) for o in outlines])
+    radius = np.array([np.max(np.hypot(*(o - c).T)) for o, c in zip(outlines, centre, strict=True)])
+    i, j = np.triu_indices(len(outlines), k=1)
+    near = np.hypot(*(centre[i] - centre[j]).T) < radius[i] + radius[j]
+    near &= dynamic[i] | dynamic[j]
+    return {
+        frozenset((int(a), int(b)))
+        for a, b in zip(i[near], j[near], strict=True)
+        if overlap(outlines[a], outlines[b]).area > 0.0
+    }
+
+
+def test_spatial_hash_finds_exactly_the_overlapping_pairs(f64):
+    """The hash pairs exactly the bodies an all-pairs search finds, never across worlds."""
+    base = scene_from_dict(dense_field_scene(0))
+    scenes = [base, base.reseeded(1)]
+    world = World(scenes)
+    rng = np.random.default_rng(SEED)
+    model = ReferenceModel.from_scenes(scenes)
+    n = model.n_bodies
+    pos = world.positions()
+    ang = world.angles()
+    dynamic = model.kind == 0
+    # Both worlds scattered over the same 7 m square: ~3 overlaps per block, and bodies of
+    # the two worlds overlap each other everywhere.
+    side = 7.0
+    pos[dynamic] = rng.uniform(0.0, side, (int(dynamic.sum()), 2))
+    ang[dynamic] = rng.uniform(0.0, 2.0 * np.pi, int(dynamic.sum()))
+    for w, sl in enumerate(world.world_slices()):
+        pos[sl.start] = [side / 2, 2.0 + 3.0 * w]  # wall_a across the square
+        pos[sl.start + 1] = [5.0 - 3.0 * w, side / 2]  # wall_b across the square
+    world.data.body_pos.from_numpy(pos)
+    world.data.body_angle.from_numpy(ang)
+    world.hash.build()
+    world.contacts.compute(world.cur)
+    assert world.data.status.to_numpy()[STATUS_SLOT_OVERFLOW] <= world.layout.slots
+    state = ReferenceState(pos=pos, angle=ang, vel=world.velocities(), omega=world.omegas())
+    outlines = [outline_np(model, state, i) for i in range(n)]
+    found = {frozenset(k) for k in kernel_contacts(world, 1 - world.cur)}
+    for a, b in found:
+        assert model.world[a] == model.world[b]
+    total = 0
+    for sl in world.world_slices():
+        ids = np.arange(sl.start, sl.stop)
+        brute = {
+            frozenset(int(ids[k]) for k in pair)
+            for pair in all_overlapping_pairs([outlines[k] for k in ids], dynamic[ids])
+        }
+        mine = {p for p in found if min(p) >= sl.start and max(p) < sl.stop}
+        assert mine == brute
+        total += len(brute)
+    # Across worlds the bodies overlap as much as within: the hash kept them apart.
+    across = all_overlapping_pairs(outlines, dynamic) - found
+    print(f"{total} pairs in the two worlds; {len(across)} overlapping pairs across worlds")
+    assert total > 500 and len(across) > 500
+
+
+# --------------------------------------------------------------------------------------------
+# Contact memory and capacity
+# --------------------------------------------------------------------------------------------
+
+
+def bouncing_block(law: RateState) -> dict:
+    """A spinning, tilted block thrown at a floor and pressed back onto it: it bounces."""
+    tilt, half = 0.2, 0.4
+    lowest = half * (math.cos(tilt) + math.sin(tilt))  # centre height of the lowest corner
+    return {
+        "simulation": {"duration": 1.0},
+        "friction": law.to_dict(),
+        "body": [
+            {
+                "name": "floor",
+                "kind": "fixed",
+                "shape": "rectangle",
+                "width": 6.0,
+                "length": 0.5,
+                "position": [0.0, -0.25],
+            },
+            {
+                "name": "block",
+                "shape": "rectangle",
+                "width": 0.8,
+                "length": 0.8,
+                "position": [-1.0, lowest + 2e-3],
+                "angle": tilt,
+                "velocity": [1.0, -0.6],
+                "omega": 2.0,
+                "force": [0.0, -3000.0],
+            },
+        ],
+    }
+
+
+def test_theta_persists_through_a_contact_and_restarts_for_a_new_one(run_opts, taichi_runtime):
+    """theta follows the exponential update step to step, and a new contact starts at -B x."""
+    law = RateState(t_c=0.01)  # short memory, so that theta moves within one contact
+    scene = scene_from_dict(bouncing_block(law))
+    sim = Simulation(scene, **run_opts)
+    world = sim.world
+    model = ReferenceModel.from_scenes([scene])
+    decay = math.exp(-world.dt / law.t_c)
+    rtol = THETA_RTOL[taichi_runtime[1]]
+
+    def slip_log(v):
+        return math.log(max(abs(v), law.v_star) / law.v_star)
+
+    episodes, in_contact, theta_prev = 0, False, None
+    lagging = 0  # steps where theta differs from the equilibrium at the current slip
+    for _ in range(round(0.25 / world.dt)):
+        state = ReferenceState(
+            pos=world.positions(),
+            angle=world.angles(),
+            vel=world.velocities(),
+            omega=world.omegas(),
+        )
+        world.step()
+        contacts = kernel_contacts(world, world.cur)
+        if (1, 0) not in contacts:
+            in_contact, theta_prev = False, None
+            continue
+        theta = contacts[(1, 0)][3]
+        # The slip rate this step: the partner's velocity relative to the owner's at the
+        # centroid of the overlap, along the chord (geometry.overlap, held to shapely).
+        c = contact_force_np(
+            outline_np(model, state, 1, state.pos[1]),
+            outline_np(model, state, 0, state.pos[1]),
+            np.zeros(2),
+            state.vel[1],
+            state.omega[1],
+            state.pos[0] - state.pos[1],
+            state.vel[0],
+            state.omega[0],
+            dt=world.dt,
+            k_e=model.k_e,
+            k_v=model.k_v,
+            k_t=float(model.k_t[0]),
+            c_t=float(model.c_t[0]),
+            law=law,
+        )
+        steady = -law.B * slip_log(c.slip)
+        if not in_contact:
+            episodes += 1
+            assert theta == pytest.approx(steady, rel=rtol, abs=1e-12)  # new: equilibrium
+        else:
+            assert theta == pytest.approx(
+                steady + (theta_prev - steady) * decay, rel=rtol, abs=1e-12
+            )
+            lagging += abs(theta - steady) > 0.05 * law.B
+        in_contact, theta_prev = True, theta
+    sim.check()
+    print(
+        f"{episodes} separate contacts with the floor; theta lagged its equilibrium "
+        f"in {lagging} steps"
+    )
+    assert episodes >= 2  # the same pair touched again after separating
+    assert lagging > 5  # memory mattered: a reset every step would have failed the update
+
+
+def test_more_contacts_than_slots_is_a_capacity_error(tmp_path, run_opts):
+    """A body owning two contacts with one slot stops the run with CapacityError."""
+    block = {"shape": "rectangle", "width": 1.0, "length": 1.0}
+    scene = scene_from_dict(
+        {
+            "simulation": {"duration": 0.1},
+            "body": [  # body 0 owns both its contacts (the lower id of two dynamic bodies)
+                {**block, "name": "middle", "position": [0.0, 0.0]},
+                {**block, "name": "left", "position": [-1.001, 0.0], "velocity": [1.0, 0.0]},
+                {**block, "name": "right", "position": [1.001, 0.0], "velocity": [-1.0, 0.0]},
+            ],
+        }
+    )
+    path = tmp_path / "overflow.h5"
+    sim = Simulation(scene, slots=1, **run_opts)
+    with pytest.raises(CapacityError, match="slots"):
+        sim.run(out=path)
+    run = read_run(path)
+    assert run["attrs"]["status"] == "failed"
+    assert "slots" in run["attrs"]["failure"]
+    # With the default slots the same scene runs through the collision.
+    Simulation(scene, **run_opts).run(until=0.005)

@@ -1,0 +1,651 @@
+"""The DEM engine (World, Simulation) against references that share none of its code.
+
+- The NumPy twin of a whole step (``taichi_ice.reference``) on seeded random small scenes.
+- Closed forms and SciPy: a face-on collision is a damped linear oscillator with a no-tension
+  clamp (``solve_ivp``); a block pressed onto a floor obeys Coulomb's law; a contact sliding
+  at constant speed carries the rate-and-state steady state ``mu0 + (A - B) ln(V / V*)``.
+- Conservation and symmetry: momentum and angular momentum of a free field, an energy
+  budget that closes and converges with dt, a rotated and translated scene, worlds that run
+  the same alone or batched.
+- Failure: an unstable dt refused, a forced one stopped with a readable 'failed' file.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from taichi_ice import DivergenceError, Simulation, StabilityError, load_scenario
+from taichi_ice.friction import RateState
+from taichi_ice.geometry import diamond, rectangle, sat_separated, transform
+from taichi_ice.io import read_run
+from taichi_ice.reference import (
+    ReferenceModel,
+    ReferenceState,
+    reference_energies,
+    reference_step,
+)
+from taichi_ice.scenario import scene_from_dict
+from taichi_ice.simulation import energy_residual
+from taichi_ice.world import World
+
+# The kernels and the NumPy twin do the same float64 operations in the same order; a force
+# that round-off moves across a 2^-24 N fixed-point step changes a velocity by
+# dt 6e-8 N / m ~ 1e-14 relative, which the stiff contacts amplify over 100 steps.
+REFERENCE_RTOL = 1e-9
+REFERENCE_STEPS = 100
+
+# Semi-implicit Euler is first order in dt: at dt = stable/40 (omega dt ~ 0.02) a face-on
+# collision lasts 0.13 % less than the ODE's and rebounds 0.16 % faster (twice that at
+# stable/20).
+COLLISION_DURATION_RTOL = 3e-3
+COLLISION_RESTITUTION_RTOL = 6e-3
+# Halving dt must shrink both errors like a first-order method (ratio 0.5).
+FIRST_ORDER_RATIO = 0.7
+# The clamp releases the contact when k d + c d' = 0, before d = 0: the dashpot stops pulling
+# the pair back, so the clamped restitution exceeds the linear one by O(zeta) (3.8 % here);
+# the duration barely moves (the pair coasts apart at constant speed).
+CLAMP_RESTITUTION_RTOL = 0.05
+CLAMP_DURATION_RTOL = 5e-3
+# Equal and opposite fixed-point forces cancel exactly; v += dt F / m rounds at machine
+# precision every step.
+MOMENTUM_RTOL = {"f64": 1e-12, "f32": 1e-5}
+
+# A block pressed onto the floor: its load builds from zero over the first ~20 ms (the
+# normal contact rings at 100 Hz), its stick spring stretches mu F / k_t ~ 3e-5 m, and the
+# step is first order: 1 % covers all three for a 0.1 m stop.
+STOP_DISTANCE_RTOL = 0.01
+# Under a load below mu F the block slips while its normal load rings up from zero (the
+# contact dips near zero load in the first ~20 ms: 0.23 mm here), then the stick spring holds.
+HOLD_START_SLIP = 1e-3  # m
+# A block at rest on the floor still rocks: Hopkins' dashpot acts on the mean approach speed
+# only, so rocking is barely damped (tens of um at the centroid). Sliding would move it mm.
+REST_RINGING = 2e-4  # m
+SLIDE_ACCELERATION_RTOL = 0.01
+
+# Six to eight relaxation times t_c after sliding starts theta is within exp(-6) of its
+# steady state, ~1e-3 of mu at most.
+MU_SS_RTOL = 2e-3
+
+# Angular momentum: contact torques are truncated to 2^-24 N m per contact and step, a few
+# 1e-9 kg m^2/s over the run against |L| ~ 1e3 kg m^2/s. In float32, x += dt v rounds the
+# lever arms at 1e-7 relative every step: 1e-5 of L over 2500 steps.
+ANGULAR_MOMENTUM_RTOL = {"f64": 1e-10, "f32": 1e-4}
+# Kinetic + elastic energy may not grow without work in; the explicit step lets it wobble
+# by its first-order error within a contact (a few 1e-4 of it at dt = auto).
+ENERGY_GROWTH_RTOL = 2e-3
+# The pushed field's energy budget closes to 0.1 % of the work in at dt = auto (DESIGN:
+# "up to a residual that shrinks with dt").
+BUDGET_RTOL = 0.01
+
+# A rotated and translated copy differs by round-off of the rotated coordinates (1e-16 m),
+# which the stiff, chaotic contacts amplify over 300 steps (1e-11 m here).
+SYMMETRY_ATOL = 1e-9  # m, m/s, rad
+
+
+@pytest.fixture(scope="module")
+def run_opts(taichi_runtime: tuple[str, str]) -> dict:
+    """Arch and precision of the session, for every Simulation of this module."""
+    arch, precision = taichi_runtime
+    return {"arch": arch, "precision": precision}
+
+
+@pytest.fixture(scope="module")
+def precision(taichi_runtime: tuple[str, str]) -> str:
+    return taichi_runtime[1]
+
+
+@pytest.fixture(scope="module")
+def f64(taichi_runtime: tuple[str, str]) -> None:
+    """Skip tolerances that only float64 meets."""
+    if taichi_runtime[1] != "f64":
+        pytest.skip("needs float64 (tolerances near round-off)")
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes
+# --------------------------------------------------------------------------------------------
+
+
+def cluster_scene_dict(
+    seed: int, n: int, law: str = "coulomb", water: bool = False, speed: float = 1.5
+) -> dict:
+    """A few jittered rectangles and diamonds closing in on each other, gaps of 0.2-2 mm.
+
+    Each block comes from a random direction toward the centre of those already placed, is
+    slid in until it would touch one (bisection on the separating-axis test) and backed off
+    by the gap; every block moves toward that centre at ``speed`` plus noise and spins, so
+    they collide within a few steps.
+    """
+    rng = np.random.default_rng(seed)
+    placed: list[np.ndarray] = []
+    bodies: list[dict] = []
+    for k in range(n):
+        shape = "rectangle" if rng.random() < 0.5 else "diamond"
+        width, length = rng.uniform(0.5, 1.0, 2)
+        angle = float(rng.uniform(-np.pi, np.pi))
+        outline = (rectangle if shape == "rectangle" else diamond)(width, length)
+        local = transform(outline, [0.0, 0.0], angle)
+        direction = np.zeros(2)
+        position = np.zeros(2)
+        if placed:
+            centre = np.mean([b["position"] for b in bodies], axis=0)
+            a = rng.uniform(0.0, 2.0 * np.pi)
+            direction = np.array([np.cos(a), np.sin(a)])
+            lo, hi = 0.0, 5.0
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                clear = all(sat_separated(local + centre + mid * direction, q) for q in placed)
+                lo, hi = (lo, mid) if clear else (mid, hi)
+            position = centre + (hi + rng.uniform(2e-4, 2e-3)) * direction
+        placed.append(local + position)
+        velocity = -speed * direction + rng.uniform(-0.2, 0.2, 2)
+        bodies.append(
+            {
+                "name": f"b{k}",
+                "shape": shape,
+                "width": float(width),
+                "length": float(length),
+                "position": position.tolist(),
+                "angle": angle,
+                "velocity": velocity.tolist(),
+                "omega": float(rng.uniform(-1.0, 1.0)),
+            }
+        )
+    scene = {"simulation": {"duration": 1.0}, "friction": {"law": law}, "body": bodies}
+    if water:
+        scene["water"] = {}
+    return scene
+
+
+def rotated_scene_dict(scene: dict, angle: float, shift) -> dict:
+    """The scene turned by ``angle`` (rad) about the origin and moved by ``shift`` (m)."""
+    c, s = math.cos(angle), math.sin(angle)
+    rot = np.array([[c, -s], [s, c]])
+    out = copy.deepcopy(scene)
+    for body in out["body"]:
+        body["position"] = (rot @ np.asarray(body["position"]) + np.asarray(shift)).tolist()
+        body["velocity"] = (rot @ np.asarray(body.get("velocity", [0.0, 0.0]))).tolist()
+        body["angle"] = body.get("angle", 0.0) + angle
+    return out
+
+
+def two_squares(gap: float = 1e-3, v_left: float = 0.7, v_right: float = -0.3):
+    """scenarios/two_squares.toml with the faces ``gap`` apart, closing at 1 m/s."""
+    base = load_scenario("scenarios/two_squares.toml")
+    raw = copy.deepcopy(dict(base.raw))
+    raw["body"][0]["position"] = [-0.5 - gap / 2, 0.0]
+    raw["body"][0]["velocity"] = [v_left, 0.0]
+    raw["body"][1]["position"] = [0.5 + gap / 2, 0.0]
+    raw["body"][1]["velocity"] = [v_right, 0.0]
+    return scene_from_dict(raw)
+
+
+# --------------------------------------------------------------------------------------------
+# The NumPy twin of a step
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("law", "water"), [("coulomb", False), ("rate-state", True)])
+def test_world_matches_numpy_reference_step(f64, law, water):
+    """Every body of six random 2-5 block worlds follows the plain NumPy step for 100 steps."""
+    scenes = [
+        scene_from_dict(cluster_scene_dict(seed, 2 + seed % 4, law=law, water=water))
+        for seed in range(6)
+    ]
+    dt = min(s.dt for s in scenes)
+    world = World(scenes, dt=dt)
+    model = ReferenceModel.from_scenes(scenes)
+    state = ReferenceState.from_scenes(scenes)
+    np.testing.assert_array_equal(world.k_t, model.k_t)
+    contact_steps = np.zeros(len(scenes), dtype=int)
+    worst = 0.0
+    for _ in range(REFERENCE_STEPS):
+        world.step()
+        state = reference_step(state, model, dt)
+        for i, _j in state.contacts:
+            contact_steps[model.world[i]] += 1
+        for got, want in (
+            (world.positions(), state.pos),
+            (world.velocities(), state.vel),
+            (world.angles(), state.angle),
+            (world.omegas(), state.omega),
+        ):
+            err = float(np.max(np.abs(got - want))) / float(np.max(np.abs(want)))
+            worst = max(worst, err)
+            assert err < REFERENCE_RTOL
+    print(f"max relative difference over {REFERENCE_STEPS} steps: {worst:.2e}")
+    # Every world collided, most for many steps: the comparison covers the contact forces.
+    assert np.all(contact_steps >= 20), contact_steps
+    energy_k, energy_np = world.energies(), reference_energies(state, model)
+    scale = np.max(np.abs(energy_np), axis=1, keepdims=True)
+    assert np.all(np.abs(energy_k - energy_np) <= REFERENCE_RTOL * scale)
+    # Contact memory: the same pairs carry the same stretch.
+    counts = world.data.contact_count.to_numpy()[world.cur]
+    partners = world.data.contact_partner.to_numpy()[world.cur]
+    xis = world.data.contact_xi.to_numpy()[world.cur]
+    kernel_xi = {
+        (i, int(partners[i, s])): float(xis[i, s])
+        for i in range(model.n_bodies)
+        for s in range(counts[i])
+    }
+    assert set(kernel_xi) == set(state.contacts)
+    for key, xi in kernel_xi.items():
+        assert xi == pytest.approx(state.contacts[key].xi, rel=REFERENCE_RTOL, abs=1e-15)
+
+
+# --------------------------------------------------------------------------------------------
+# Closed forms
+# --------------------------------------------------------------------------------------------
+
+
+def clamped_oscillator(k: float, c: float, m_eff: float, v0: float) -> tuple[float, float]:
+    """Duration (s) and restitution of m d'' = -max(k d + c d', 0), d(0) = 0, d'(0) = v0."""
+
+    def rhs(_t, y):
+        return [y[1], -max(k * y[0] + c * y[1], 0.0) / m_eff]
+
+    def apart(_t, y):
+        return y[0]
+
+    apart.terminal = True
+    apart.direction = -1
+    sol = solve_ivp(
+        rhs,
+        (0.0, 1.0),
+        [0.0, v0],
+        events=apart,
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-16,
+        first_step=1e-9,
+    )
+    return float(sol.t_events[0][0]), float(-sol.y_events[0][0][1] / v0)
+
+
+def collide(scene, dt: float, run_opts: dict) -> tuple[float, float, np.ndarray]:
+    """Overlap duration (s, crossings interpolated), restitution, momentum drift (N s)."""
+    sim = Simulation(scene, dt=dt, **run_opts)
+    mass = scene.masses
+    momentum0 = (mass[:, None] * sim.velocities()).sum(axis=0)
+    width = 1.0
+    depth, drift = [], []
+    v0 = sim.velocities()[0, 0] - sim.velocities()[1, 0]
+    while True:
+        sim.step()
+        pos, vel = sim.positions(), sim.velocities()
+        depth.append(width - (pos[1, 0] - pos[0, 0]))
+        drift.append((mass[:, None] * vel).sum(axis=0) - momentum0)
+        if len(depth) > 3 and depth[-1] < 0.0 and max(depth) > 0.0:
+            break
+        assert len(depth) < 100_000
+    depth = np.array(depth)
+    t = sim.dt * np.arange(1, len(depth) + 1)
+    first = int(np.argmax(depth > 0.0))
+    last = len(depth) - 2  # the last step with overlap
+    # Before and after the contact the bodies move at constant speed: linear crossings.
+    t_in = t[first - 1] + (0.0 - depth[first - 1]) / (depth[first] - depth[first - 1]) * sim.dt
+    t_out = t[last] + (0.0 - depth[last]) / (depth[last + 1] - depth[last]) * sim.dt
+    vel = sim.velocities()
+    restitution = (vel[1, 0] - vel[0, 0]) / v0
+    return t_out - t_in, restitution, np.max(np.abs(drift))
+
+
+def test_face_on_collision_is_a_clamped_damped_oscillator(run_opts, precision):
+    """Two squares meeting face on: k = k_e L, c = k_v L, m_eff = m/2, no tension."""
+    scene = two_squares()
+    m = float(scene.masses[0])
+    width = 1.0
+    k = scene.ice.contact_stiffness * width
+    c = scene.ice.contact_viscosity * width
+    m_eff = m / 2.0
+    v0 = 1.0
+    omega0 = math.sqrt(k / m_eff)
+    zeta = c / (2.0 * math.sqrt(k * m_eff))
+    omega_d = omega0 * math.sqrt(1.0 - zeta * zeta)
+    linear_duration = math.pi / omega_d
+    linear_restitution = math.exp(-zeta * math.pi / math.sqrt(1.0 - zeta * zeta))
+    duration, restitution = clamped_oscillator(k, c, m_eff, v0)
+    # The independent reference agrees with the linear closed form up to the clamp.
+    assert duration == pytest.approx(linear_duration, rel=CLAMP_DURATION_RTOL)
+    assert linear_restitution < restitution < linear_restitution * (1 + CLAMP_RESTITUTION_RTOL)
+
+    errors = []
+    for fraction in (20, 40):
+        t, e, drift = collide(scene, scene.stable_dt / fraction, run_opts)
+        errors.append((abs(t / duration - 1.0), abs(e / restitution - 1.0)))
+        print(
+            f"dt = stable/{fraction}: duration {t * 1e3:.4f} ms (ODE {duration * 1e3:.4f}, "
+            f"linear {linear_duration * 1e3:.4f}), restitution {e:.5f} (ODE {restitution:.5f},"
+            f" linear {linear_restitution:.5f}), momentum drift {drift:.1e} N s"
+        )
+        assert drift <= MOMENTUM_RTOL[precision] * m * v0
+    (t_coarse, e_coarse), (t_fine, e_fine) = errors
+    assert t_fine < COLLISION_DURATION_RTOL
+    assert e_fine < COLLISION_RESTITUTION_RTOL
+    assert t_fine < FIRST_ORDER_RATIO * t_coarse
+    assert e_fine < FIRST_ORDER_RATIO * e_coarse
+
+
+def block_on_floor(v0: float, tangential: float, pressing: float, duration: float = 0.4):
+    """scenarios/sliding_block.toml: a 1 m block pressed onto a 6 m fixed floor."""
+    base = load_scenario("scenarios/sliding_block.toml")
+    raw = copy.deepcopy(dict(base.raw))
+    raw["simulation"]["duration"] = duration
+    raw["body"][0]["width"] = 6.0
+    raw["body"][0]["position"] = [2.0, -0.25]
+    raw["body"][1]["velocity"] = [v0, 0.0]
+    raw["body"][1]["force"] = [tangential, -pressing]
+    return scene_from_dict(raw)
+
+
+def test_block_pressed_onto_floor_obeys_coulomb(run_opts):
+    """Slides from v0 to rest in v0^2/(2 mu F/m); holds below mu F; above, accelerates."""
+    mu = 0.5
+    pressing = 2707.56  # N: the block's weight, as in the scenario file
+    v0 = 1.0
+    scenes = [
+        block_on_floor(v0, 0.0, pressing),
+        block_on_floor(0.0, 0.8 * mu * pressing, pressing),
+        block_on_floor(0.0, 1.5 * mu * pressing, pressing),
+    ]
+    m = float(scenes[0].masses[1])
+    sim = Simulation(scenes, **run_opts)
+    n = round(0.4 / sim.dt)
+    x0 = [s.positions[1, 0] for s in scenes]
+    x = np.empty((n, 3))
+    v = np.empty((n, 3))
+    for step in range(n):
+        sim.step()
+        pos, vel = sim.world.positions(), sim.world.velocities()
+        for w, sl in enumerate(sim.world.world_slices()):
+            x[step, w] = pos[sl][1, 0] - x0[w]
+            v[step, w] = vel[sl][1, 0]
+    sim.check()
+    t = sim.dt * np.arange(1, n + 1)
+
+    stop = v0**2 / (2.0 * mu * pressing / m)
+    rest = t > 0.3  # well after the stop at v0 / (mu F / m) = 0.2 s
+    distance = float(np.mean(x[rest, 0]))
+    print(f"stopping distance {distance:.5f} m, Coulomb {stop:.5f} m")
+    print(
+        f"at rest: mean speed {np.mean(v[rest, 0]):.1e} m/s, position spread "
+        f"{np.ptp(x[rest, 0]) * 1e6:.1f} um"
+    )
+    assert distance == pytest.approx(stop, rel=STOP_DISTANCE_RTOL)
+    assert np.ptp(x[rest, 0]) < REST_RINGING
+
+    held = t > 0.05
+    print(
+        f"held under 0.8 mu F: slipped {np.max(np.abs(x[:, 1])) * 1e6:.1f} um while loading, "
+        f"then moved {np.ptp(x[held, 1]) * 1e6:.2f} um"
+    )
+    assert np.max(np.abs(x[:, 1])) < HOLD_START_SLIP
+    assert np.ptp(x[held, 1]) < REST_RINGING
+
+    sliding = (t > 0.1) & (t < 0.35)
+    slope = np.polyfit(t[sliding], v[sliding, 2], 1)[0]
+    expected = (1.5 - 1.0) * mu * pressing / m
+    print(f"acceleration under 1.5 mu F: {slope:.4f} m/s^2, expected {expected:.4f}")
+    assert slope == pytest.approx(expected, rel=SLIDE_ACCELERATION_RTOL)
+
+
+def test_rate_state_contact_slides_at_steady_state_friction(run_opts):
+    """A block held on a floor that moves at V carries mu_ss = mu0 + (A - B) ln(V / V*)."""
+    law = RateState(t_c=0.05)  # short memory: 8 t_c in 0.4 s
+    pressing = 2707.56
+    speeds = (1e-3, 1e-2, 1e-1)
+
+    def scene(speed):
+        # The floor (kinematic) drags the block against a fixed stop 50 um away: it sticks,
+        # rides along, hits the stop, and from then slides at V on the floor.
+        return scene_from_dict(
+            {
+                "simulation": {"duration": 0.4, "series_interval": 0.001},
+                "friction": law.to_dict(),
+                "body": [
+                    {
+                        "name": "floor",
+                        "kind": "kinematic",
+                        "shape": "rectangle",
+                        "width": 6.0,
+                        "length": 0.5,
+                        "position": [0.0, -0.25],
+                        "velocity": [speed, 0.0],
+                        "probe": True,
+                    },
+                    {
+                        "name": "block",
+                        "shape": "rectangle",
+                        "width": 1.0,
+                        "length": 1.0,
+                        "position": [0.0, 0.5],
+                        "force": [0.0, -pressing],
+                    },
+                    {
+                        "name": "stop",
+                        "kind": "fixed",
+                        "shape": "rectangle",
+                        "width": 0.5,
+                        "length": 1.0,
+                        "position": [0.75 + 5e-5, 0.6],
+                    },
+                ],
+            }
+        )
+
+    sim = Simulation([scene(s) for s in speeds], **run_opts)
+    result = sim.run(until=0.4)
+    for w, speed in enumerate(speeds):
+        closed_form = law.mu0 + (law.A - law.B) * math.log(speed / law.v_star)
+        assert float(law.steady_state(speed)) == pytest.approx(closed_form, rel=1e-12)
+        series = result.series[w]
+        late = series["time"] > 0.35
+        force = series["probe_force"][late, 0, :]  # on the floor, from the block
+        mu = float(np.mean(np.abs(force[:, 0]) / np.abs(force[:, 1])))
+        print(f"V = {speed:g} m/s: F_t / F_n = {mu:.5f}, mu_ss = {closed_form:.5f}")
+        assert mu == pytest.approx(closed_form, rel=MU_SS_RTOL)
+
+
+# --------------------------------------------------------------------------------------------
+# Conservation
+# --------------------------------------------------------------------------------------------
+
+
+def test_free_field_conserves_momentum_and_never_gains_energy(run_opts, precision):
+    """Free floes: momentum and angular momentum (with spin) stay; K + E never grows."""
+    scene = load_scenario("scenarios/free_field.toml")
+    sim = Simulation(scene, **run_opts)
+    m, inertia = scene.masses, scene.inertias
+
+    def momenta():
+        x, v, w = sim.positions(), sim.velocities(), sim.omegas()
+        linear = (m[:, None] * v).sum(axis=0)
+        angular = float(np.sum(m * (x[:, 0] * v[:, 1] - x[:, 1] * v[:, 0]) + inertia * w))
+        scale = float(np.sum(m * np.abs(x[:, 0] * v[:, 1] - x[:, 1] * v[:, 0])))
+        return linear, angular, scale
+
+    p0, l0, l_scale = momenta()
+    e0 = sim.energies()
+    mechanical = [e0["kinetic_energy"] + e0["elastic_energy"]]
+    p_drift = l_drift = 0.0
+    chunk = round(0.01 / sim.dt)
+    for _ in range(60):  # 0.6 s
+        sim.step(chunk)
+        p, l_now, _ = momenta()
+        p_drift = max(p_drift, float(np.max(np.abs(p - p0))))
+        l_drift = max(l_drift, abs(l_now - l0))
+        e = sim.energies()
+        mechanical.append(e["kinetic_energy"] + e["elastic_energy"])
+    sim.check()
+    mechanical = np.array(mechanical)
+    growth = float(np.max(np.diff(mechanical))) / mechanical[0]
+    dissipated = e["friction_energy"] + e["viscous_energy"]
+    print(
+        f"momentum drift {p_drift:.1e} N s of {np.sum(m * np.hypot(*scene.velocities.T)):.0f};"
+        f" angular {l_drift:.1e} of {l_scale:.0f} kg m^2/s; K + E {mechanical[0]:.2f} -> "
+        f"{mechanical[-1]:.2f} J (largest rise between samples {growth:.1e} of it), dissipated "
+        f"{dissipated:.2f} J, residual {e['residual']:.3f} J"
+    )
+    assert dissipated > 0.05 * mechanical[0]  # the floes did collide
+    p_scale = np.sum(m * np.linalg.norm(scene.velocities, axis=1))
+    assert p_drift <= MOMENTUM_RTOL[precision] * p_scale
+    assert l_drift <= ANGULAR_MOMENTUM_RTOL[precision] * l_scale
+    assert growth <= ENERGY_GROWTH_RTOL
+
+
+def pushed_field():
+    """scenarios/pushed_field.toml, shortened: the pusher starts 5 cm above the rubble."""
+    base = load_scenario("scenarios/pushed_field.toml")
+    raw = copy.deepcopy(dict(base.raw))
+    raw["simulation"]["duration"] = 1.0
+    pusher = next(b for b in raw["body"] if b["name"] == "pusher")
+    pusher["position"] = [3.0, 7.0]
+    pusher["velocity"] = [0.0, -0.5]
+    return scene_from_dict(raw)
+
+
+def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision):
+    """Work in = kinetic + elastic + friction + viscous + drag, up to O(dt)."""
+    scene = pushed_field()
+    worst = []
+    for fraction in (1, 2):
+        sim = Simulation(scene, dt=scene.dt / fraction, **run_opts)
+        series = sim.run(until=1.0).series[0]
+        residual = energy_residual(series)
+        work = series["work_in"][-1]
+        worst.append(float(np.max(np.abs(residual))) / work)
+        print(
+            f"dt = {sim.dt:.3g} s: work in {work:.2f} J, friction "
+            f"{series['friction_energy'][-1]:.2f} J, drag {series['drag_energy'][-1]:.2f} J, "
+            f"max |residual| {100 * worst[-1]:.3f} % of the work in"
+        )
+        assert work > 100.0  # the pusher did compact the rubble
+        assert worst[-1] < BUDGET_RTOL
+    if precision == "f64":  # float32 round-off of the energy sums hides the O(dt) term
+        assert worst[1] < FIRST_ORDER_RATIO * worst[0]
+
+
+# --------------------------------------------------------------------------------------------
+# Symmetry and batching
+# --------------------------------------------------------------------------------------------
+
+
+def test_rotated_translated_scene_gives_rotated_trajectories(f64, run_opts):
+    """Turning and moving a scene turns and moves its trajectories, nothing else."""
+    angle, shift = 0.7, np.array([12.5, -3.25])
+    c, s = math.cos(angle), math.sin(angle)
+    rot = np.array([[c, -s], [s, c]])
+    scene = cluster_scene_dict(11, 5)
+    scenes = [scene_from_dict(scene), scene_from_dict(rotated_scene_dict(scene, angle, shift))]
+    sim = Simulation(scenes, **run_opts)
+    contacts = 0
+    for _ in range(300):
+        sim.step()
+        contacts += int(sim.world.contact_counts()[0])
+    sim.check()
+    assert contacts > 100
+    gap = max(
+        np.max(np.abs(sim.positions(1) - (sim.positions(0) @ rot.T + shift))),
+        np.max(np.abs(sim.velocities(1) - sim.velocities(0) @ rot.T)),
+        np.max(np.abs(sim.angles(1) - (sim.angles(0) + angle))),
+    )
+    print(f"rotated copy: largest difference {gap:.1e} after 300 steps ({contacts} contacts)")
+    np.testing.assert_allclose(
+        sim.positions(1), sim.positions(0) @ rot.T + shift, rtol=0, atol=SYMMETRY_ATOL
+    )
+    np.testing.assert_allclose(
+        sim.velocities(1), sim.velocities(0) @ rot.T, rtol=0, atol=SYMMETRY_ATOL
+    )
+    np.testing.assert_allclose(sim.angles(1), sim.angles(0) + angle, rtol=0, atol=SYMMETRY_ATOL)
+    np.testing.assert_allclose(sim.omegas(1), sim.omegas(0), rtol=0, atol=SYMMETRY_ATOL)
+
+
+def test_batched_worlds_match_each_world_alone_bit_for_bit(f64):
+    """Forces gathered in fixed point: a world's trajectory does not depend on its batch."""
+    scenes = [scene_from_dict(cluster_scene_dict(seed, 3 + seed)) for seed in range(2)]
+    dt = min(s.dt for s in scenes)
+    batch = World(scenes, dt=dt)
+    for _ in range(200):
+        batch.step()
+    for w, scene in enumerate(scenes):
+        alone = World([scene], dt=dt)
+        for _ in range(200):
+            alone.step()
+        sl = batch.world_slices()[w]
+        assert alone.contact_counts()[0] == batch.contact_counts()[w]
+        np.testing.assert_array_equal(alone.positions(), batch.positions()[sl])
+        np.testing.assert_array_equal(alone.velocities(), batch.velocities()[sl])
+        np.testing.assert_array_equal(alone.angles(), batch.angles()[sl])
+        np.testing.assert_array_equal(alone.omegas(), batch.omegas()[sl])
+        # Energy terms are summed in float in candidate order, which the hash sets.
+        np.testing.assert_allclose(alone.energies()[0], batch.energies()[w], rtol=1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# Failure
+# --------------------------------------------------------------------------------------------
+
+
+def test_unstable_time_step_is_refused(run_opts):
+    """A dt above the contact stability limit is refused before anything runs."""
+    scene = two_squares()
+    with pytest.raises(StabilityError, match="stability limit"):
+        Simulation(scene, dt=2.0 * scene.stable_dt, **run_opts)
+
+
+def confined_block(gap: float = 1e-3):
+    """A 1 m block rattling in a fixed box with ``gap`` (m) on every side."""
+
+    def wall(name, x, y, width, length):
+        return {
+            "name": name,
+            "kind": "fixed",
+            "shape": "rectangle",
+            "width": width,
+            "length": length,
+            "position": [x, y],
+        }
+
+    edge = 0.75 + gap
+    return scene_from_dict(
+        {
+            "simulation": {"duration": 1.0},
+            "body": [
+                {
+                    "name": "block",
+                    "shape": "rectangle",
+                    "width": 1.0,
+                    "length": 1.0,
+                    "position": [0.0, 0.0],
+                    "velocity": [1.0, 0.3],
+                    "omega": 1.0,
+                },
+                wall("left", -edge, 0.0, 0.5, 2.0),
+                wall("right", edge, 0.0, 0.5, 2.0),
+                wall("bottom", 0.0, -edge, 3.0, 0.5),
+                wall("top", 0.0, edge, 3.0, 0.5),
+            ],
+        }
+    )
+
+
+def test_forced_unstable_run_stops_with_a_readable_failed_file(tmp_path, run_opts):
+    """Forced past the limit, a run diverges, stops with DivergenceError, keeps its file."""
+    # The limit is conservative (the lightest effective mass of any corner hit): a block
+    # that cannot escape its walls gains energy at every contact from about 4x the limit.
+    scene = confined_block()
+    path = tmp_path / "diverged.h5"
+    sim = Simulation(scene, dt=5.0 * scene.stable_dt, force_dt=True, **run_opts)
+    assert sim.dt > scene.stable_dt
+    with pytest.raises(DivergenceError):
+        sim.run(until=1.0, out=path)
+    run = read_run(path)
+    assert run["attrs"]["status"] == "failed"
+    assert "diverged" in run["attrs"]["failure"]
+    assert 1 <= len(run["series"]["time"]) < 100
+    assert run["frames"]["position"].shape[1:] == (5, 2)

@@ -150,73 +150,72 @@ class ContactStage:
         m, d = ti.static((self.model, self.data))
         nxt = 1 - cur
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
-        if True:
-            p, n_p = self.outline(i, xi_)
-            q, n_q = self.outline(j, xi_)
-            area, point, normal, width, _kind = overlap_ti(p, n_p, q, n_q)
-            if area > 0.0:
-                # Memory of this pair from the last step, if it was in contact then.
-                found = -1
-                for s in range(d.contact_count[cur, i]):
-                    if d.contact_partner[cur, i, s] == j:
-                        found = s
-                xi = 0.0
-                elastic = 0.0
+        p, n_p = self.outline(i, xi_)
+        q, n_q = self.outline(j, xi_)
+        area, point, normal, width, _kind = overlap_ti(p, n_p, q, n_q)
+        if area > 0.0:
+            # Memory of this pair from the last step, if it was in contact then.
+            found = -1
+            for s in range(d.contact_count[cur, i]):
+                if d.contact_partner[cur, i, s] == j:
+                    found = s
+            xi = 0.0
+            elastic = 0.0
+            if found >= 0:
+                xi = d.contact_xi[cur, i, found]
+                elastic = d.contact_elastic[cur, i, found]
+            r_i, r_j = point, point + (xi_ - xj_)  # point is relative to body i
+            v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
+                d.body_vel[i] + perp(d.body_omega[i], r_i)
+            )
+            tangent = ti.Vector([-normal[1], normal[0]])
+            approach = -v_rel.dot(normal)
+            slip = v_rel.dot(tangent)
+            f_n, f_el = normal_force(area, width, approach, self.k_e, self.k_v)
+
+            mu = 0.0
+            theta_new = 0.0
+            w = m.body_world[i]
+            if ti.static(self.layout.rate_state):
+                a_, b_, mu0 = (
+                    m.world_rate_state[w, 0],
+                    m.world_rate_state[w, 1],
+                    m.world_rate_state[w, 2],
+                )
+                v_star, t_c = m.world_rate_state[w, 3], m.world_rate_state[w, 4]
+                x = slip_log(ti.abs(slip), v_star)
+                theta = theta_equilibrium(x, b_)
                 if found >= 0:
-                    xi = d.contact_xi[cur, i, found]
-                    elastic = d.contact_elastic[cur, i, found]
-                r_i, r_j = point, point + (xi_ - xj_)  # point is relative to body i
-                v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
-                    d.body_vel[i] + perp(d.body_omega[i], r_i)
-                )
-                tangent = ti.Vector([-normal[1], normal[0]])
-                approach = -v_rel.dot(normal)
-                slip = v_rel.dot(tangent)
-                f_n, f_el = normal_force(area, width, approach, self.k_e, self.k_v)
+                    theta = d.contact_theta[cur, i, found]
+                mu = rate_state_mu(theta, x, a_, mu0)
+                theta_new = theta_step(theta, x, x, x, dt, b_, t_c, ti.static(self.method))
+            else:
+                mu = m.world_mu[w]
 
-                mu = 0.0
-                theta_new = 0.0
-                w = m.body_world[i]
+            f_t, xi_new, slip_work, damp_work = tangential_force(
+                xi, slip, dt, m.world_tangential[w, 0], m.world_tangential[w, 1], mu * f_n
+            )
+            force = f_n * normal + f_t * tangent  # on j; -force on i
+            self.add_force(j, force, cross2(r_j, force))
+            self.add_force(i, -force, -cross2(r_i, force))
+
+            # Elastic energy stored in the contact: the work of its elastic force on the
+            # approach. (integral k_e A dA / L equals it only for relative translation;
+            # when the bodies turn, dA / dt = L v_n at the chord's middle, not at the
+            # centroid where the force acts, and the budget kept an error dt does not
+            # shrink.)
+            elastic += f_el * approach * dt
+            d.body_energy[i, BODY_FRICTION] += slip_work
+            d.body_energy[i, BODY_VISCOUS] += (f_n - f_el) * approach * dt + damp_work
+
+            if used < self.layout.slots:
+                d.contact_partner[nxt, i, used] = j
+                d.contact_xi[nxt, i, used] = xi_new
+                d.contact_area[nxt, i, used] = area
+                d.contact_elastic[nxt, i, used] = elastic
                 if ti.static(self.layout.rate_state):
-                    a_, b_, mu0 = (
-                        m.world_rate_state[w, 0],
-                        m.world_rate_state[w, 1],
-                        m.world_rate_state[w, 2],
-                    )
-                    v_star, t_c = m.world_rate_state[w, 3], m.world_rate_state[w, 4]
-                    x = slip_log(ti.abs(slip), v_star)
-                    theta = theta_equilibrium(x, b_)
-                    if found >= 0:
-                        theta = d.contact_theta[cur, i, found]
-                    mu = rate_state_mu(theta, x, a_, mu0)
-                    theta_new = theta_step(theta, x, x, x, dt, b_, t_c, ti.static(self.method))
-                else:
-                    mu = m.world_mu[w]
-
-                f_t, xi_new, slip_work, damp_work = tangential_force(
-                    xi, slip, dt, m.world_tangential[w, 0], m.world_tangential[w, 1], mu * f_n
-                )
-                force = f_n * normal + f_t * tangent  # on j; -force on i
-                self.add_force(j, force, cross2(r_j, force))
-                self.add_force(i, -force, -cross2(r_i, force))
-
-                # Elastic energy stored in the contact: the work of its elastic force on the
-                # approach. (integral k_e A dA / L equals it only for relative translation;
-                # when the bodies turn, dA / dt = L v_n at the chord's middle, not at the
-                # centroid where the force acts, and the budget kept an error dt does not
-                # shrink.)
-                elastic += f_el * approach * dt
-                d.body_energy[i, BODY_FRICTION] += slip_work
-                d.body_energy[i, BODY_VISCOUS] += (f_n - f_el) * approach * dt + damp_work
-
-                if used < self.layout.slots:
-                    d.contact_partner[nxt, i, used] = j
-                    d.contact_xi[nxt, i, used] = xi_new
-                    d.contact_area[nxt, i, used] = area
-                    d.contact_elastic[nxt, i, used] = elastic
-                    if ti.static(self.layout.rate_state):
-                        d.contact_theta[nxt, i, used] = theta_new
-                used += 1
+                    d.contact_theta[nxt, i, used] = theta_new
+            used += 1
         return used
 
     @ti.func

@@ -40,7 +40,7 @@ REFERENCE_RTOL = 1e-9
 REFERENCE_STEPS = 100
 
 # Semi-implicit Euler is first order in dt: at dt = stable/40 (omega dt ~ 0.02) a face-on
-# collision lasts 0.13 % less than the ODE's and rebounds 0.16 % faster (twice that at
+# collision lasts 0.13 % less than the ODE's and its restitution is 0.3 % off (twice both at
 # stable/20).
 COLLISION_DURATION_RTOL = 3e-3
 COLLISION_RESTITUTION_RTOL = 6e-3

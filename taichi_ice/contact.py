@@ -15,9 +15,9 @@ For every candidate pair the owner body's thread clips the two outlines
 
 Ownership: each pair is handled once, by a dynamic body if exactly one is dynamic, else by
 the lower id; small-large pairs by the small body. The owner keeps the contact's memory
-(partner, ``xi``, ``theta``, last area, stored elastic energy) in one of its K slots; a pair
-that no longer overlaps is not written again, so its memory is dropped. More than K contacts
-raise the overflow status, which the simulation turns into an error.
+(partner, ``xi``, ``theta``, stored elastic energy; and the overlap area, for output) in one
+of its K slots; a pair that no longer overlaps is not written again, so its memory is
+dropped. More than K contacts raise the overflow status, which the simulation turns into an error.
 
 Forces are gathered in 64-bit fixed point (``state.FORCE_QUANTUM``), so a run is bit-for-bit
 reproducible on any number of threads and in any batch.

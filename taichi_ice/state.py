@@ -49,7 +49,7 @@ body_energy          f64      N x 4       cumulative per-body terms (J), see BOD
 contact_partner      i32      2 x N x K   partner body of each slot, -1 if empty; two buffers
 contact_count        i32      2 x N       used slots per body, per buffer
 contact_xi           real     2 x N x K   tangential spring stretch along the tangent (m)
-contact_area         real     2 x N x K   overlap area at the last step (m^2)
+contact_area         real     2 x N x K   overlap area of the contact this step (m^2), output only
 contact_elastic      real     2 x N x K   normal elastic energy stored in the contact (J)
 contact_theta        real     2 x N x K   rate-and-state state variable (rate-state only)
 world_energy         f64      W x E       running energy terms (J), see ENERGY_* indices

@@ -22,7 +22,6 @@ from .energy import EnergyMeter
 from .errors import CapacityError, DivergenceError, StabilityError
 from .integrate import Integrator
 from .state import (
-    ENERGY_COUNT,
     KIND_DYNAMIC,
     KIND_NAMES,
     STATUS_NONFINITE,
@@ -371,4 +370,4 @@ class World:
         return host, layout
 
 
-__all__ = ["ENERGY_COUNT", "World"]
+__all__ = ["World"]

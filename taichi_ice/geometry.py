@@ -197,6 +197,18 @@ def min_penetration_axis(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarra
     return best_depth, best_axis
 
 
+def min_width(p: np.ndarray) -> float:
+    """Thinnest width of a convex polygon (m): the least distance between two parallel
+    supporting lines, which for a convex polygon lies across one of its edges."""
+    p = np.asarray(p, dtype=np.float64)
+    e = np.roll(p, -1, axis=0) - p
+    n = np.stack([e[:, 1], -e[:, 0]], axis=1) / np.hypot(e[:, 0], e[:, 1])[:, None]
+    # Distance of every vertex from every edge's line; the farthest vertex gives the width
+    # across that edge.
+    d = np.abs(np.einsum("ekd,ed->ek", p[None, :, :] - p[:, None, :], n))
+    return float(np.min(np.max(d, axis=1)))
+
+
 def sat_separated(p: np.ndarray, q: np.ndarray) -> bool:
     """True when an edge line of ``p`` or ``q`` separates them (touching counts as separated).
 

@@ -20,9 +20,14 @@ from pathlib import Path
 import numpy as np
 
 from . import backend
-from .errors import TaichiIceError
+from .errors import DivergenceError, TaichiIceError
 from .io import SERIES_ENERGY, RunWriter
 from .state import ENERGY_COUNT
+
+# The energy budget is broken, and the run stopped as diverged, once a world holds or has
+# dissipated this fraction more energy than came in (initial kinetic + elastic, plus the work
+# of kinematic bodies). Healthy runs close their budget to well under 1 %.
+BUDGET_BREACH = 0.5
 
 
 @dataclass
@@ -205,20 +210,26 @@ class Simulation:
         except (TaichiIceError, KeyboardInterrupt) as exc:
             status = "failed"
             failure = str(exc) or type(exc).__name__
+            # What was sampled before the failure travels with the error (``exc.result``).
+            exc.result = self._result(series, paths, status, failure, start)
             raise
         finally:
             wall = _time.perf_counter() - start
             bar.close()
             for w in writers:
                 w.close(status, failure, steps=self.world.steps, wall_time=wall)
-        result = RunResult(
+        return self._result(series, paths, status, failure, start)
+
+    def _result(self, series, paths, status: str, failure: str, start: float) -> RunResult:
+        return RunResult(
             series=[{k: np.asarray(v) for k, v in s.items()} for s in series],
             paths=paths,
-            steps=n_total,
+            steps=self.world.steps,
             dt=self.dt,
-            wall_time=wall,
+            wall_time=_time.perf_counter() - start,
+            status=status,
+            failure=failure,
         )
-        return result
 
     def _sample(self, series, writers, sample_dt: float) -> None:
         energies = self.world.energies()
@@ -232,6 +243,28 @@ class Simulation:
                 s[key].append(value)
             if writers:
                 writers[w].add_sample(t, force, energies[w][:ENERGY_COUNT], int(contacts[w]))
+        self._check_budget(energies)
+
+    def _check_budget(self, energies: np.ndarray) -> None:
+        """Raise DivergenceError if a world holds or has dissipated far more energy than it
+        was given: an explicit integration past its limit creates energy from nothing."""
+        e = energies[:, :ENERGY_COUNT].T
+        e0 = self.initial_energy[:, :ENERGY_COUNT].T
+        terms = dict(zip(SERIES_ENERGY, e, strict=True))
+        came_in = (
+            e0[SERIES_ENERGY.index("kinetic_energy")]
+            + e0[SERIES_ENERGY.index("elastic_energy")]
+            + terms["work_in"]
+        )
+        created = -energy_residual(terms, dict(zip(SERIES_ENERGY, e0, strict=True)))
+        bad = np.nonzero(created > BUDGET_BREACH * np.maximum(came_in, 0.0) + 1e-6)[0]
+        if bad.size:
+            w = int(bad[0])
+            raise DivergenceError(
+                f"world {w} created {created[w]:.4g} J of energy from {came_in[w]:.4g} J in "
+                f"at t = {self.world.time:.4g} s (dt = {self.dt:.3g} s); the run diverged: "
+                "lower dt (or use dt = 'auto' without force_dt)"
+            )
 
     def _frame(self, writers) -> None:
         if not writers:
@@ -290,25 +323,29 @@ class Progress:
         self.total, self.dt, self.enabled, self.width = max(total, 1), dt, enabled, width
         self.start = _time.perf_counter()
         self.last = 0.0
+        # On a terminal the bar redraws in place; in a log file it is a line every 15 s.
+        self.tty = sys.stderr.isatty()
+        self.every = 0.2 if self.tty else 15.0
 
     def update(self, k: int) -> None:
         if not self.enabled:
             return
         now = _time.perf_counter()
-        if now - self.last < 0.2 and k < self.total:
+        if now - self.last < self.every and k < self.total:
             return
         self.last = now
         frac = k / self.total
         rate = k / max(now - self.start, 1e-9)
         eta = (self.total - k) / max(rate, 1e-9)
         filled = int(self.width * frac)
+        start, end = ("\r", " ") if self.tty else ("", "\n")
         sys.stderr.write(
-            f"\r[{'#' * filled}{'.' * (self.width - filled)}] {100 * frac:5.1f}%  "
-            f"t = {k * self.dt:7.3f} s  {rate:8.0f} steps/s  {eta:5.0f} s left "
+            f"{start}[{'#' * filled}{'.' * (self.width - filled)}] {100 * frac:5.1f}%  "
+            f"t = {k * self.dt:7.3f} s  {rate:8.0f} steps/s  {eta:5.0f} s left{end}"
         )
         sys.stderr.flush()
 
     def close(self) -> None:
-        if self.enabled:
+        if self.enabled and self.tty:
             sys.stderr.write("\n")
             sys.stderr.flush()

@@ -16,6 +16,9 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
+	$(BIN)/taichi-ice paper --out $(OUT)/paper
+
+validate: $(STAMP)
 	$(BIN)/taichi-ice validate --out $(OUT)/validation
 
 test: $(STAMP)

@@ -21,6 +21,14 @@ EXAMPLES = {
     "validate": """examples:
   taichi-ice validate --out out/validation          # Figure 3, exact solutions, stability
   taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)""",
+    "paper": """examples:
+  taichi-ice paper --out out/paper                  # Figures 3-6, budget, spread over 16 layouts
+  taichi-ice paper --out out/paper --seeds 0        # the four single runs only
+  taichi-ice paper --out /tmp/short --until 2 --seeds 2   # a smoke run""",
+    "ensemble": """examples:
+  taichi-ice ensemble scenarios/pillar.toml --seeds 32 --out out/ens
+  taichi-ice ensemble scenarios/pillar.toml --seeds 8 --friction coulomb:0.3 \\
+      --friction rate-state:t_c=5 --until 10 --out out/ens""",
     "plot": """examples:
   taichi-ice plot runs/pushed.h5                    # figures beside the file
   taichi-ice plot runs/pushed.h5 --out figs/ --animate""",
@@ -109,6 +117,37 @@ def _cmd_validate(args) -> int:
     return validate_command(args.out, speed=args.speed, quick=args.quick)
 
 
+def _cmd_paper(args) -> int:
+    from .paper import DEFAULT_SCENE, reproduce
+
+    reproduce(
+        args.out,
+        seeds=args.seeds,
+        scene_path=args.scene or DEFAULT_SCENE,
+        until=args.until,
+        arch=args.arch,
+        precision=args.precision,
+        progress=not args.quiet,
+        quick=args.quick,
+    )
+    return 0
+
+
+def _cmd_ensemble(args) -> int:
+    from .ensemble import ensemble_command
+
+    return ensemble_command(
+        args.scene,
+        args.out,
+        n_seeds=args.seeds,
+        laws=args.friction or [None],
+        until=args.until,
+        arch=args.arch,
+        precision=args.precision,
+        progress=not args.quiet,
+    )
+
+
 def _cmd_plot(args) -> int:
     from .plots import plot_run
 
@@ -116,6 +155,23 @@ def _cmd_plot(args) -> int:
     for path in written:
         print(f"wrote {path}")
     return 0
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: use a whole number, 0 or more")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = _nonnegative_int(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: use a whole number, 1 or more")
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -164,6 +220,44 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/validation", help="output folder")
     p.add_argument("--speed", action="store_true", help="also chart speed against accuracy")
     p.add_argument("--quick", action="store_true", help="small sizes (for tests)")
+
+    p = add(
+        "paper",
+        "the paper's experiment: rubble past a pillar, four friction models, spread over layouts",
+        _cmd_paper,
+    )
+    p.add_argument("--out", default="out/paper", help="output folder (default out/paper)")
+    p.add_argument(
+        "--seeds",
+        type=_nonnegative_int,
+        default=16,
+        help="other jittered layouts per model, run as batched worlds (default 16; 0 skips)",
+    )
+    p.add_argument("--until", type=float, default=None, help="end time, s (default 20)")
+    p.add_argument("--scene", default=None, help="scene file (default scenarios/pillar.toml)")
+    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
+    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
+    p.add_argument("--quiet", action="store_true", help="no progress")
+    p.add_argument("--quick", action="store_true", help="small sizes for Figure 3 (for tests)")
+
+    p = add(
+        "ensemble",
+        "one scene over many seeds (and laws) as batched worlds: metrics, spread chart",
+        _cmd_ensemble,
+    )
+    p.add_argument("scene", help="scene file (TOML)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--seeds", type=_positive_int, default=16, help="layouts (default 16)")
+    p.add_argument(
+        "--friction",
+        type=parse_friction,
+        action="append",
+        help="a law to run (repeatable; default the scene's): coulomb[:MU], rate-state[:..]",
+    )
+    p.add_argument("--until", type=float, default=None, help="end time, s (default: duration)")
+    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
+    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
     p = add("plot", "figures (and an animation) of a run file", _cmd_plot)
     p.add_argument("run", help="HDF5 run file")

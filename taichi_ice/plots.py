@@ -36,17 +36,22 @@ def outlines(run: dict, frame: int) -> list[np.ndarray]:
     return out
 
 
-def draw_bodies(ax, run: dict, frame: int) -> None:
-    """Filled outlines of every body at ``frame`` on ``ax``: walls grey, pushers orange."""
+def draw_bodies(ax, run: dict, frame: int, view: tuple | None = None) -> None:
+    """Filled outlines of every body at ``frame`` on ``ax``: walls grey, pushers orange.
+
+    ``view`` is ``(xmin, xmax, ymin, ymax)`` in m; default every body in full.
+    """
     from matplotlib.collections import PolyCollection
 
     kinds = run["bodies"]["kinds"]
     polys = outlines(run, frame)
     colours = [KIND_COLOURS.get(k, "#cccccc") for k in kinds]
     ax.add_collection(PolyCollection(polys, facecolors=colours, edgecolors="k", linewidths=0.4))
-    pts = np.concatenate(polys)
-    ax.set_xlim(pts[:, 0].min(), pts[:, 0].max())
-    ax.set_ylim(pts[:, 1].min(), pts[:, 1].max())
+    if view is None:
+        pts = np.concatenate(polys)
+        view = (pts[:, 0].min(), pts[:, 0].max(), pts[:, 1].min(), pts[:, 1].max())
+    ax.set_xlim(view[0], view[1])
+    ax.set_ylim(view[2], view[3])
     ax.set_aspect("equal")
 
 
@@ -142,6 +147,59 @@ def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
     anim.save(path, writer=PillowWriter(fps=fps))
     plt.close(fig)
     return path
+
+
+def plot_spread(results: dict, path: Path, single: bool = False, titles=None, colours=None) -> Path:
+    """Each ensemble metric over the layouts, per law (box and dots).
+
+    Args:
+        results: ``{label: EnsembleResult}``.
+        single: world 0 of each result is the reference run: starred, not in the box.
+        titles, colours: per label (default the label, matplotlib's cycle).
+    """
+    plt = _pyplot()
+    titles, colours = titles or {}, colours or {}
+    panels = (
+        ("peak_force", "peak force on probe (kN)", 1e-3, True),
+        ("friction_energy", "total frictional energy (J)", 1.0, True),
+        ("concentration", "largest share of frictional\nenergy lost in any 1 s", 1.0, False),
+    )
+    fig, axes = plt.subplots(1, len(panels), figsize=(12, 4))
+    labels = list(results)
+    first = 1 if single else 0
+    rng = np.random.default_rng(0)  # horizontal scatter of the dots, for legibility only
+    for ax, (name, ylabel, scale, log) in zip(axes, panels, strict=True):
+        for x, label in enumerate(labels):
+            values = results[label].values(name) * scale
+            d = values[first:][np.isfinite(values[first:])]
+            colour = colours.get(label, f"C{x}")
+            if d.size:
+                ax.boxplot([d], positions=[x], widths=0.5, showfliers=False)
+                ax.scatter(x + rng.uniform(-0.15, 0.15, d.size), d, s=12, color=colour, zorder=3)
+            if single:
+                ax.scatter(
+                    [x],
+                    [values[0]],
+                    marker="*",
+                    s=140,
+                    color="red",
+                    edgecolor="k",
+                    zorder=4,
+                    label="single run" if x == 0 else None,
+                )
+        ax.set_xticks(range(len(labels)), [titles.get(k, k) for k in labels], fontsize=8)
+        ax.set_xlim(-0.6, len(labels) - 0.4)
+        ax.set_ylabel(ylabel)
+        if log and any(np.nanmax(r.values(name), initial=0) > 0 for r in results.values()):
+            ax.set_yscale("log")
+    n = len(results[labels[0]].seeds) - first
+    if single:
+        axes[0].legend(fontsize=8)
+    fig.suptitle(
+        f"Spread over {n} jittered layouts (dots)" + (", single runs starred" if single else ""),
+        fontsize=10,
+    )
+    return _save(fig, path)
 
 
 def _save(fig, path: Path) -> Path:

@@ -1,0 +1,322 @@
+"""Ensembles: one scene over many seeds, run as the batched worlds of one Simulation.
+
+    from taichi_ice.ensemble import run_ensemble
+    scene = load_scenario("scenarios/pillar.toml")
+    ens = run_ensemble(scene, seeds=range(16), friction=RateState())
+    ens.metrics[3]["peak_force"], ens.summary()["concentration"]["median"]
+
+One DEM run of rubble is very sensitive to its initial layout (the paper calls its own
+comparison tentative for this reason), so the quantities worth reporting are distributions
+over layouts. Each seed redraws the scene's field jitter (``Scene.reseeded``); all seeds run
+together in one set of Taichi fields, and each world is bit-identical to the same seed run
+alone (forces are summed in fixed point), so batching changes the cost, never the answer.
+
+The metrics of one run (``run_metrics``), all from its ``/series``:
+
+- ``peak_force``, ``mean_force`` (N): largest and time-mean magnitude of the total contact
+  force on the probe bodies (the pillar), over the whole run.
+- ``friction_energy`` (J): frictional dissipation at the end (the paper's Figure 6).
+- ``concentration``: the largest share of ``friction_energy`` dissipated in any one window
+  of ``window`` seconds (default 1 s). Steady dissipation over 20 s gives about 1/20 = 0.05;
+  a run whose dissipation is one event gives close to 1. This is the measure behind the
+  paper's remark that with mu = 0.5 "the energy loss seems to be concentrated in two
+  individual events" while rate-and-state is "steadier".
+- ``final_force`` (N): mean probe force over the last ``window`` seconds, and ``released``
+  (1 or 0): whether it has fallen below a tenth of ``peak_force``, i.e. whether the largest
+  jam against the probe had broken by the end.
+- ``first_contact`` (s): first sample with a force on a probe (NaN if never).
+- ``residual`` (J) and ``residual_rel``: the energy budget's residual at the end, absolute
+  and relative to the energy that came in (initial kinetic + elastic, plus work in).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import TaichiIceError
+
+METRICS = (
+    "peak_force",
+    "mean_force",
+    "friction_energy",
+    "concentration",
+    "final_force",
+    "released",
+    "first_contact",
+    "residual",
+    "residual_rel",
+)
+
+# A jam counts as released when the probe force over the last window is below this fraction
+# of its peak.
+RELEASED_FRACTION = 0.1
+
+
+def law_label(law) -> str:
+    """Short name of a friction law for files and legends: ``mu0.5``, ``rate-state``."""
+    from .friction import Coulomb, RateState
+
+    if isinstance(law, Coulomb):
+        return f"mu{law.mu:g}"
+    if isinstance(law, RateState):
+        default = RateState(method=law.method)
+        if law.to_dict() == default.to_dict():
+            return "rate-state"
+        changed = {
+            k: v
+            for k, v in law.to_dict().items()
+            if k not in ("law", "method") and v != default.to_dict()[k]
+        }
+        return "rate-state_" + "_".join(f"{k}{v:g}" for k, v in changed.items())
+    raise TypeError(f"friction must be a Coulomb or RateState, got {type(law).__name__}")
+
+
+def probe_force_magnitude(series: dict) -> np.ndarray:
+    """``(T,)`` magnitude of the total force on the probe bodies (N); zeros if none."""
+    f = np.asarray(series["probe_force"])
+    if f.ndim != 3 or f.shape[1] == 0:
+        return np.zeros(len(series["time"]))
+    return np.linalg.norm(f.sum(axis=1), axis=-1)
+
+
+def concentration(time: np.ndarray, energy: np.ndarray, window: float = 1.0) -> float:
+    """Largest share of the final ``energy`` gained in any window of ``window`` seconds.
+
+    ``energy`` is cumulative (non-decreasing up to round-off), sampled at ``time``; windows
+    start anywhere on the sample grid and the energy at their ends is interpolated linearly.
+    Returns NaN when nothing was dissipated; 1.0 when the run is shorter than the window.
+    """
+    time, energy = np.asarray(time, dtype=float), np.asarray(energy, dtype=float)
+    total = energy[-1] - energy[0]
+    if not total > 0:
+        return math.nan
+    if time[-1] - time[0] <= window:
+        return 1.0
+    starts = time[time <= time[-1] - window]
+    gained = np.interp(starts + window, time, energy) - np.interp(starts, time, energy)
+    return float(np.max(gained) / total)
+
+
+def run_metrics(series: dict, window: float = 1.0) -> dict[str, float]:
+    """The metrics of one run (see the module docstring) from its ``/series`` arrays."""
+    from .simulation import energy_residual
+
+    t = np.asarray(series["time"])
+    force = probe_force_magnitude(series)
+    touching = np.nonzero(force > 0)[0]
+    residual = float(energy_residual(series)[-1])
+    came_in = series["kinetic_energy"][0] + series["elastic_energy"][0] + series["work_in"][-1]
+    peak = float(force.max()) if force.size else 0.0
+    last = t >= t[-1] - window
+    last[0] = False  # t = 0 carries no impulse
+    final = float(force[last].mean()) if last.any() else 0.0
+    return {
+        "peak_force": peak,
+        # Samples are equally spaced, so the time mean is the sample mean (t = 0 excluded:
+        # it carries no impulse).
+        "mean_force": float(force[1:].mean()) if force.size > 1 else 0.0,
+        "friction_energy": float(series["friction_energy"][-1]),
+        "concentration": concentration(t, series["friction_energy"], window),
+        "final_force": final,
+        "released": float(peak > 0 and final < RELEASED_FRACTION * peak),
+        "first_contact": float(t[touching[0]]) if touching.size else math.nan,
+        "residual": residual,
+        "residual_rel": residual / came_in if came_in > 0 else math.nan,
+    }
+
+
+@dataclass
+class EnsembleResult:
+    """One law over many seeds: per world (in ``seeds`` order) its series and metrics.
+
+    ``status`` is 'complete' or 'failed'; after a failure the series and metrics hold what
+    every world had reached, and ``failure`` says why.
+    """
+
+    label: str
+    seeds: list[int]
+    series: list[dict[str, np.ndarray]]
+    metrics: list[dict[str, float]]
+    paths: list[Path] = field(default_factory=list)
+    steps: int = 0
+    dt: float = 0.0
+    wall_time: float = 0.0
+    status: str = "complete"
+    failure: str = ""
+
+    def values(self, name: str) -> np.ndarray:
+        """``(n_seeds,)`` one metric over the seeds."""
+        return np.array([m[name] for m in self.metrics], dtype=float)
+
+    def summary(self) -> dict[str, dict[str, float]]:
+        """Per metric: min, quartiles, median, max and mean over the seeds (NaNs ignored)."""
+        out = {}
+        for name in METRICS:
+            v = self.values(name)
+            v = v[np.isfinite(v)]
+            if not v.size:
+                out[name] = {"n": 0}
+                continue
+            q1, med, q3 = np.percentile(v, [25, 50, 75])
+            out[name] = {
+                "n": int(v.size),
+                "min": float(v.min()),
+                "q1": float(q1),
+                "median": float(med),
+                "q3": float(q3),
+                "max": float(v.max()),
+                "mean": float(v.mean()),
+            }
+        return out
+
+
+def run_ensemble(
+    scene,
+    seeds: Iterable[int],
+    friction=None,
+    *,
+    until: float | None = None,
+    out: Sequence[str | Path] | str | Path | None = None,
+    arch: str = "cpu",
+    precision: str = "f64",
+    dt: float | None = None,
+    slots: int | None = None,
+    window: float = 1.0,
+    progress: bool = False,
+) -> EnsembleResult:
+    """Run ``scene`` reseeded with every seed, all seeds as worlds of one Simulation.
+
+    Args:
+        scene: the Scene (its own seed is one layout like any other).
+        seeds: field-jitter seeds, one world each.
+        friction: law replacing the scene's (a Coulomb or RateState); None keeps it.
+        until: end time (s); default the scene's duration.
+        out: a folder (files ``seed-XXXX.h5`` in it), one path per seed, or None (no files).
+        arch, precision, dt, slots: as for ``Simulation``.
+        window: the concentration window (s).
+        progress: progress bar on stderr.
+
+    Returns:
+        EnsembleResult. A run that diverges or overflows does not raise: its files are
+        marked failed, and the result has ``status = 'failed'`` with what was reached.
+
+    Raises:
+        ScenarioError: a seed's jitter makes blocks overlap at the start.
+    """
+    from .simulation import Simulation
+
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("an ensemble needs at least one seed")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds repeat: {seeds}")
+    if friction is not None:
+        scene = scene.with_friction(friction)
+    scenes = [scene.reseeded(s) for s in seeds]
+    if isinstance(out, str | Path):
+        width = max(4, len(str(max(seeds))))
+        out = [Path(out) / f"seed-{s:0{width}d}.h5" for s in seeds]
+    sim = Simulation(scenes, arch=arch, precision=precision, dt=dt, slots=slots)
+    try:
+        result = sim.run(until=until, out=out, progress=progress)
+    except TaichiIceError as exc:
+        result = exc.result
+    return EnsembleResult(
+        label=law_label(scene.friction),
+        seeds=seeds,
+        series=result.series,
+        metrics=[run_metrics(s, window) for s in result.series],
+        paths=list(result.paths),
+        steps=result.steps,
+        dt=result.dt,
+        wall_time=result.wall_time,
+        status=result.status,
+        failure=result.failure,
+    )
+
+
+def ensemble_command(
+    scene_path,
+    out,
+    n_seeds: int,
+    laws=(None,),
+    until: float | None = None,
+    arch: str = "cpu",
+    precision: str = "f64",
+    progress: bool = True,
+) -> int:
+    """The body of ``taichi-ice ensemble``: each law over ``n_seeds`` layouts.
+
+    Writes ``out/<law>/seed-XXXX.h5`` (every world), ``out/ensemble.json`` (metrics per seed
+    and their distribution per law), ``out/ensemble.csv`` (one row per law and seed) and
+    ``out/ensemble.png`` (the spread chart).
+    """
+    import csv
+    import json
+    import sys
+
+    from .plots import plot_spread
+    from .scenario import load_scenario
+
+    scene = load_scenario(scene_path)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    seeds = [scene.simulation.seed + k for k in range(n_seeds)]
+    results: dict[str, EnsembleResult] = {}
+    for law in laws:
+        label = law_label(law if law is not None else scene.friction)
+        if label in results:
+            raise ValueError(f"--friction {label} given twice")
+        if progress:
+            print(f"ensemble: {label}, {len(seeds)} layouts", file=sys.stderr, flush=True)
+        ens = run_ensemble(
+            scene,
+            seeds,
+            law,
+            until=until,
+            out=out / label,
+            arch=arch,
+            precision=precision,
+            progress=progress,
+        )
+        results[label] = ens
+        summary = ens.summary()
+        peak = summary["peak_force"].get("median", math.nan)
+        energy = summary["friction_energy"].get("median", math.nan)
+        print(
+            f"{label}: {ens.status} in {ens.wall_time:.1f} s ({ens.steps} steps x "
+            f"{len(seeds)} worlds); median peak force {peak / 1e3:.3g} kN, median friction "
+            f"energy {energy:.4g} J"
+            + (f"; FAILED: {ens.failure}" if ens.status != "complete" else "")
+        )
+    report = {
+        "scene": str(scene.source),
+        "seeds": seeds,
+        "laws": {
+            label: {
+                "status": ens.status,
+                "failure": ens.failure,
+                "steps": ens.steps,
+                "dt": ens.dt,
+                "wall_time": ens.wall_time,
+                "metrics": ens.metrics,
+                "summary": ens.summary(),
+            }
+            for label, ens in results.items()
+        },
+    }
+    (out / "ensemble.json").write_text(json.dumps(report, indent=2) + "\n")
+    with open(out / "ensemble.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["law", "seed", *METRICS])
+        for label, ens in results.items():
+            for seed, m in zip(ens.seeds, ens.metrics, strict=True):
+                writer.writerow([label, seed, *(m[k] for k in METRICS)])
+    plot_spread(results, out / "ensemble.png")
+    print(f"wrote {out}/ensemble.json, ensemble.csv, ensemble.png and the runs")
+    return 0 if all(e.status == "complete" for e in results.values()) else 1

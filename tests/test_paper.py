@@ -224,3 +224,20 @@ def test_ensemble_command_writes_metrics_per_seed(tmp_path, taichi_runtime):
     report = json.loads((out / "ensemble.json").read_text())
     assert report["laws"]["mu0.3"]["status"] == "complete"
     assert (out / "ensemble.png").stat().st_size > 10_000
+
+
+def test_plot_command_draws_a_run_and_animates_it(tmp_path, taichi_runtime):
+    """`taichi-ice plot RUN.h5 --animate`: the three figures, and a GIF with one image per
+    frame of the file."""
+    from PIL import Image
+
+    arch, precision = taichi_runtime
+    run = tmp_path / "sq.h5"
+    argv = ["run", str(TWO_SQUARES), "--out", str(run), "--until", "0.3", "--quiet"]
+    assert main([*argv, "--arch", arch, "--precision", precision]) == 0
+    assert main(["plot", str(run), "--out", str(tmp_path / "figs"), "--animate"]) == 0
+    for suffix in ("_probe_force.png", "_energy.png", "_positions.png"):
+        assert (tmp_path / "figs" / f"sq{suffix}").stat().st_size > 5_000, suffix
+    n_frames = len(read_run(run)["frames"]["time"])
+    with Image.open(tmp_path / "figs" / "sq.gif") as gif:
+        assert n_frames > 1 and gif.n_frames == n_frames

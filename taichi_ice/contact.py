@@ -145,12 +145,12 @@ class ContactStage:
         ti.atomic_add(d.body_torque_q[i], ti.cast(torque * q, ti.i64))
 
     @ti.func
-    def pair(self, i, j, cur, used, dt):
-        """Contact between owner i and partner j; returns the owner's new slot count."""
+    def pair(self, i, j, p, n_p, cur, used, dt):
+        """Contact between owner i, whose outline relative to its centroid is ``p``, and
+        partner j; returns the owner's new slot count."""
         m, d = ti.static((self.model, self.data))
         nxt = 1 - cur
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
-        p, n_p = self.outline(i, xi_)
         q, n_q = self.outline(j, xi_)
         area, point, normal, width, _kind = overlap_ti(p, n_p, q, n_q)
         if area > 0.0:
@@ -280,8 +280,10 @@ class ContactStage:
                         cand[n] = j
                     n += 1
             used = 0
+            # The owner's outline once for all its candidates.
+            p, n_p = self.outline(i, d.body_pos[i])
             for k in range(ti.min(n, self.n_cand)):
-                used = self.pair(i, cand[k], cur, used, dt)
+                used = self.pair(i, cand[k], p, n_p, cur, used, dt)
             d.contact_count[nxt, i] = ti.min(used, self.layout.slots)
             # More contacts than slots, or more near neighbours than the candidate list holds,
             # is reported (never silently dropped): the caller turns it into CapacityError.

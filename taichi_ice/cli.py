@@ -7,6 +7,7 @@ on stderr naming what to fix and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -167,6 +168,16 @@ def _nonnegative_int(text: str) -> int:
     return value
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not value > 0 or not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: use a time in seconds, above 0")
+    return value
+
+
 def _positive_int(text: str) -> int:
     value = _nonnegative_int(text)
     if value == 0:
@@ -210,7 +221,9 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="accept a dt above the stability limit (for stability studies)",
     )
-    p.add_argument("--until", type=float, default=None, help="end time, s (default: duration)")
+    p.add_argument(
+        "--until", type=_positive_float, default=None, help="end time, s (default: duration)"
+    )
     p.add_argument("--slots", type=int, default=None, help="contact slots per body")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -233,7 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=16,
         help="other jittered layouts per model, run as batched worlds (default 16; 0 skips)",
     )
-    p.add_argument("--until", type=float, default=None, help="end time, s (default 20)")
+    p.add_argument("--until", type=_positive_float, default=None, help="end time, s (default 20)")
     p.add_argument("--scene", default=None, help="scene file (default scenarios/pillar.toml)")
     p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
     p.add_argument("--precision", default="f64", choices=["f64", "f32"])
@@ -254,7 +267,9 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         help="a law to run (repeatable; default the scene's): coulomb[:MU], rate-state[:..]",
     )
-    p.add_argument("--until", type=float, default=None, help="end time, s (default: duration)")
+    p.add_argument(
+        "--until", type=_positive_float, default=None, help="end time, s (default: duration)"
+    )
     p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
     p.add_argument("--precision", default="f64", choices=["f64", "f32"])
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -241,3 +241,10 @@ def test_plot_command_draws_a_run_and_animates_it(tmp_path, taichi_runtime):
     n_frames = len(read_run(run)["frames"]["time"])
     with Image.open(tmp_path / "figs" / "sq.gif") as gif:
         assert n_frames > 1 and gif.n_frames == n_frames
+
+
+def test_paper_command_refuses_a_nonpositive_end_time(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["paper", "--until", "0"])
+    assert exc.value.code == 2
+    assert "--until" in capsys.readouterr().err

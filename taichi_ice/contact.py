@@ -232,6 +232,24 @@ class ContactStage:
         reach = m.body_radius[i] + m.body_radius[j]
         return (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach
 
+    @ti.func
+    def beyond_a_face(self, i, j):
+        """Body i's bounding circle lies wholly outside one face of body j (so they cannot
+        overlap): a cheap rejection for large bodies, whose bounding circles (a wall's is
+        half its length) meet nearly every small body of the world."""
+        m, d = ti.static((self.model, self.data))
+        q, n_q = self.outline(j, d.body_pos[i])  # relative to i's centroid
+        r = m.body_radius[i]
+        outside = False
+        for k in range(n_q):
+            a = ti.Vector([q[k, 0], q[k, 1]])
+            k1 = (k + 1) % n_q
+            e = ti.Vector([q[k1, 0], q[k1, 1]]) - a
+            # Outward normal of a counter-clockwise outline; i's centroid is the origin.
+            if -a.dot(ti.Vector([e[1], -e[0]])) > r * e.norm():
+                outside = True
+        return outside
+
     @ti.kernel
     def compute(self, cur: ti.i32):
         """Forces of every contact of the step; memory read from buffer cur, written to 1-cur."""
@@ -275,7 +293,7 @@ class ContactStage:
                     keep = dyn_i or dyn_j
                 else:
                     keep = j > i and (dyn_i or dyn_j)
-                if keep and self.near(i, j):
+                if keep and self.near(i, j) and not self.beyond_a_face(i, j):
                     if n < self.n_cand:
                         cand[n] = j
                     n += 1

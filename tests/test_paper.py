@@ -248,3 +248,26 @@ def test_paper_command_refuses_a_nonpositive_end_time(capsys):
         main(["paper", "--until", "0"])
     assert exc.value.code == 2
     assert "--until" in capsys.readouterr().err
+
+
+def test_energy_created_from_nothing_stops_the_run(run_opts):
+    """The budget guard: a world that holds far more energy than came in is a divergence;
+    the energies it actually has are not."""
+    from taichi_ice import DivergenceError
+    from taichi_ice.state import ENERGY_COUNT
+
+    sim = Simulation(load_scenario(TWO_SQUARES), **run_opts)
+    energies = sim.world.energies().copy()
+    sim._check_budget(energies)  # as it starts: nothing created
+    came_in = sum(
+        sim.initial_energy[0][SERIES_ENERGY.index(k)] for k in ("kinetic_energy", "elastic_energy")
+    )
+    assert came_in > 0
+    bad = energies.copy()
+    bad[0, SERIES_ENERGY.index("kinetic_energy")] += 0.6 * came_in + 1e-3
+    assert bad.shape[1] >= ENERGY_COUNT
+    with pytest.raises(DivergenceError, match="world 0 created"):
+        sim._check_budget(bad)
+    fine = energies.copy()
+    fine[0, SERIES_ENERGY.index("kinetic_energy")] += 0.4 * came_in
+    sim._check_budget(fine)

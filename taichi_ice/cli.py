@@ -185,6 +185,16 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _engine_options(p: argparse.ArgumentParser) -> None:
+    """The options every command that runs scenes shares: arch, precision, end, progress."""
+    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
+    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
+    p.add_argument(
+        "--until", type=_positive_float, default=None, help="end time, s (default: duration)"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="taichi-ice",
@@ -213,19 +223,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="override the scene's law: coulomb[:MU] or rate-state[:A=..,B=..,...]",
     )
-    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
-    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
+    _engine_options(p)
     p.add_argument("--dt", type=parse_dt, default=None, help="'auto' (default) or seconds")
     p.add_argument(
         "--force-dt",
         action="store_true",
         help="accept a dt above the stability limit (for stability studies)",
     )
-    p.add_argument(
-        "--until", type=_positive_float, default=None, help="end time, s (default: duration)"
-    )
     p.add_argument("--slots", type=int, default=None, help="contact slots per body")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
     p = add(
         "validate", "check the friction law against its exact solutions (Figure 3)", _cmd_validate
@@ -246,11 +251,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=16,
         help="other jittered layouts per model, run as batched worlds (default 16; 0 skips)",
     )
-    p.add_argument("--until", type=_positive_float, default=None, help="end time, s (default 20)")
     p.add_argument("--scene", default=None, help="scene file (default scenarios/pillar.toml)")
-    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
-    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
-    p.add_argument("--quiet", action="store_true", help="no progress")
+    _engine_options(p)
     p.add_argument("--quick", action="store_true", help="small sizes for Figure 3 (for tests)")
 
     p = add(
@@ -267,12 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         help="a law to run (repeatable; default the scene's): coulomb[:MU], rate-state[:..]",
     )
-    p.add_argument(
-        "--until", type=_positive_float, default=None, help="end time, s (default: duration)"
-    )
-    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
-    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _engine_options(p)
 
     p = add("plot", "figures (and an animation) of a run file", _cmd_plot)
     p.add_argument("run", help="HDF5 run file")

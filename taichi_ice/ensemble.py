@@ -33,12 +33,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .errors import TaichiIceError
+from .simulation import RunResult
 
 METRICS = (
     "peak_force",
@@ -130,9 +131,10 @@ def run_metrics(series: dict, window: float = 1.0) -> dict[str, float]:
     }
 
 
-@dataclass
-class EnsembleResult:
-    """One law over many seeds: per world (in ``seeds`` order) its series and metrics.
+@dataclass(kw_only=True)
+class EnsembleResult(RunResult):
+    """One law over many seeds: a RunResult (series, paths, steps, dt, wall time, status,
+    failure: per world, in ``seeds`` order) with the law's label and each world's metrics.
 
     ``status`` is 'complete' or 'failed'; after a failure the series and metrics hold what
     every world had reached, and ``failure`` says why.
@@ -140,14 +142,7 @@ class EnsembleResult:
 
     label: str
     seeds: list[int]
-    series: list[dict[str, np.ndarray]]
     metrics: list[dict[str, float]]
-    paths: list[Path] = field(default_factory=list)
-    steps: int = 0
-    dt: float = 0.0
-    wall_time: float = 0.0
-    status: str = "complete"
-    failure: str = ""
 
     def values(self, name: str) -> np.ndarray:
         """``(n_seeds,)`` one metric over the seeds."""
@@ -227,16 +222,10 @@ def run_ensemble(
     except TaichiIceError as exc:
         result = exc.result
     return EnsembleResult(
+        **vars(result),
         label=law_label(scene.friction),
         seeds=seeds,
-        series=result.series,
         metrics=[run_metrics(s, window) for s in result.series],
-        paths=list(result.paths),
-        steps=result.steps,
-        dt=result.dt,
-        wall_time=result.wall_time,
-        status=result.status,
-        failure=result.failure,
     )
 
 

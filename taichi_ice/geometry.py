@@ -197,6 +197,13 @@ def min_penetration_axis(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarra
     return best_depth, best_axis
 
 
+def longest_edge(p: np.ndarray) -> float:
+    """Length of a polygon's longest edge (m): the widest contact it can make."""
+    p = np.asarray(p, dtype=np.float64)
+    e = np.roll(p, -1, axis=0) - p
+    return float(np.max(np.hypot(e[:, 0], e[:, 1])))
+
+
 def min_width(p: np.ndarray) -> float:
     """Thinnest width of a convex polygon (m): the least distance between two parallel
     supporting lines, which for a convex polygon lies across one of its edges."""

@@ -20,6 +20,7 @@ Writes into DIR:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import sys
@@ -190,8 +191,8 @@ def build_summary(results: dict[str, EnsembleResult], scene, until, arch, precis
         )
         entry = {"paper": PAPER_FINDINGS.get(label, ""), "single": single}
         if seeds:
-            spread = EnsembleResult(
-                label, ens.seeds[1:], ens.series[1:], ens.metrics[1:], status=ens.status
+            spread = dataclasses.replace(
+                ens, seeds=ens.seeds[1:], series=ens.series[1:], metrics=ens.metrics[1:]
             )
             entry["spread"] = spread.summary()
             entry["seeds"] = {

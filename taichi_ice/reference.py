@@ -44,7 +44,7 @@ from .friction import (
     theta_equilibrium_np,
     theta_step_np,
 )
-from .geometry import overlap
+from .geometry import longest_edge, overlap
 from .state import (
     BODY_DRAG,
     BODY_ENERGY_COUNT,
@@ -328,8 +328,7 @@ class ReferenceModel:
                 verts.append(v)
                 force.append(np.asarray(b.force, dtype=np.float64))
                 if b.kind == "dynamic":
-                    e = np.roll(v, -1, axis=0) - v
-                    longest = max(longest, float(np.max(np.hypot(e[:, 0], e[:, 1]))))
+                    longest = max(longest, longest_edge(v))
                 if s.water is not None:
                     area = s.masses[i] / (s.ice.density * s.ice.thickness)
                     drag.append(

@@ -19,7 +19,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from .geometry import mass_properties
+from .geometry import longest_edge, mass_properties
 
 # dt = "auto" takes this fraction of the stability limit: a contact oscillation then spans
 # at least ~30 steps, so overlaps, contact widths and the friction memory are resolved.
@@ -42,8 +42,7 @@ def body_contact_limit(
     inertia = density * thickness * polar
     rel = np.asarray(vertices, dtype=np.float64) - centroid
     radius = float(np.max(np.hypot(rel[:, 0], rel[:, 1])))
-    edges = np.roll(rel, -1, axis=0) - rel
-    width = float(np.max(np.hypot(edges[:, 0], edges[:, 1])))
+    width = longest_edge(rel)
     m_eff = 1.0 / (2.0 * (1.0 / mass + radius * radius / inertia))
     k = stiffness * width
     c = viscosity * width

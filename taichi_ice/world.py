@@ -234,8 +234,7 @@ class World:
         width = 0.0
         for b in scene.bodies:
             if b.kind == "dynamic":
-                e = np.roll(b.vertices, -1, axis=0) - b.vertices
-                width = max(width, float(np.max(np.hypot(e[:, 0], e[:, 1]))))
+                width = max(width, geometry.longest_edge(b.vertices))
         return width if width > 0 else 1.0
 
     def _runaway_speed(self) -> float:

@@ -254,7 +254,6 @@ def test_energy_created_from_nothing_stops_the_run(run_opts):
     """The budget guard: a world that holds far more energy than came in is a divergence;
     the energies it actually has are not."""
     from taichi_ice import DivergenceError
-    from taichi_ice.state import ENERGY_COUNT
 
     sim = Simulation(load_scenario(TWO_SQUARES), **run_opts)
     energies = sim.world.energies().copy()
@@ -265,7 +264,6 @@ def test_energy_created_from_nothing_stops_the_run(run_opts):
     assert came_in > 0
     bad = energies.copy()
     bad[0, SERIES_ENERGY.index("kinetic_energy")] += 0.6 * came_in + 1e-3
-    assert bad.shape[1] >= ENERGY_COUNT
     with pytest.raises(DivergenceError, match="world 0 created"):
         sim._check_budget(bad)
     fine = energies.copy()

@@ -1,7 +1,7 @@
 """Overlap throughput: pairs per second of the NumPy reference and of the Taichi kernel.
 
 Seeded random convex pairs (3 to 8 vertices, about a third overlapping, the rest rejected by
-the SAT) go through ``geometry.overlap`` one by one and through ``geometry.overlap_batch``
+the SAT) go through ``geometry.overlap`` one by one and through ``batched.overlap_batch_ti``
 (``overlap_ti`` in one parallel kernel; it also writes the SAT outputs that the tests check)
 in batches of growing size. The Taichi timings exclude the first call, which compiles
 the kernel, and include the host-to-kernel copies of the ndarrays. Results go to
@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from taichi_ice import backend
-from taichi_ice.geometry import overlap, overlap_batch, transform
+from taichi_ice.batched import overlap_batch_ti
+from taichi_ice.geometry import overlap, transform
 
 MAXV = 8  # padded vertex count, as in the DEM's local matrices
 
@@ -54,11 +55,11 @@ def time_numpy(p, n_p, q, n_q, budget_s: float) -> tuple[int, float]:
 
 
 def time_taichi(p, n_p, q, n_q, repeats: int) -> float:
-    """Best wall time (s) of ``repeats`` calls of overlap_batch on the whole batch."""
+    """Best wall time (s) of ``repeats`` calls of overlap_batch_ti on the whole batch."""
     best = np.inf
     for _ in range(repeats):
         start = time.perf_counter()
-        overlap_batch(p, n_p, q, n_q)
+        overlap_batch_ti(p, n_p, q, n_q)
         best = min(best, time.perf_counter() - start)
     return best
 
@@ -75,7 +76,7 @@ def main() -> None:
     backend.init(args.arch, args.precision)
     p, n_p, q, n_q = random_pairs(max(args.sizes), args.seed)
     start = time.perf_counter()
-    overlap_batch(p[:1], n_p[:1], q[:1], n_q[:1])
+    overlap_batch_ti(p[:1], n_p[:1], q[:1], n_q[:1])
     compile_s = time.perf_counter() - start
 
     done, seconds = time_numpy(p, n_p, q, n_q, budget_s=2.0)
@@ -99,7 +100,7 @@ def main() -> None:
         "machine": platform.node(),
         "processor": platform.processor(),
         "taichi_compile_s": compile_s,
-        "overlapping_fraction": float(np.mean(overlap_batch(p, n_p, q, n_q).area > 0)),
+        "overlapping_fraction": float(np.mean(overlap_batch_ti(p, n_p, q, n_q).area > 0)),
         "rows": rows,
     }
     (args.out / "overlap.json").write_text(json.dumps(meta, indent=2) + "\n")

@@ -35,6 +35,7 @@ Writes ``rubble_field.csv``, ``rubble_field.json`` and ``rubble_field.png`` into
 import argparse
 import contextlib
 import csv
+import dataclasses
 import importlib.metadata
 import json
 import math
@@ -211,129 +212,37 @@ def rubble_scene(blocks: int, law: str, water: bool, seed: int) -> dict:
 # Memory and traffic
 # --------------------------------------------------------------------------------------------
 
-# What each kernel of the step must read (r), write (w) or update (rw) at least once, per
-# unit of: N bodies, S small (hashed) bodies, V vertices, H hash buckets, C contacts of the
-# step, B bodies in a contact (min(N, 2C)), O contact owners (min(N, C)). Small tables (per
-# world, the few large bodies, flags) are left out. This is compulsory traffic: a body's data
-# gathered again by each neighbour is taken to hit the cache, so the bound is optimistic.
-# (kernel, owner, field, unit, elements per unit, access)
-TRAFFIC = (
-    # Broad phase: clear, count, scan and fill the buckets from the positions.
-    ("hash.build", "hash", "bucket_count", "H", 1, "w"),
-    ("hash.build", "hash", "bucket_fill", "H", 1, "w"),
-    ("hash.build", "hash", "bucket_start", "H", 1, "w"),
-    ("hash.build", "model", "body_small", "N", 1, "r"),
-    ("hash.build", "model", "body_world", "N", 1, "r"),
-    ("hash.build", "data", "body_pos", "N", 1, "r"),
-    ("hash.build", "hash", "body_cell", "N", 1, "w"),
-    ("hash.build", "hash", "sorted_ids", "S", 1, "w"),
-    # Narrow phase and forces: neighbours from the hash, outlines, last step's memory.
-    ("contacts.compute", "model", "body_world", "N", 1, "r"),
-    ("contacts.compute", "model", "body_kind", "N", 1, "r"),
-    ("contacts.compute", "model", "body_small", "N", 1, "r"),
-    ("contacts.compute", "model", "body_radius", "N", 1, "r"),
-    ("contacts.compute", "hash", "body_cell", "N", 1, "r"),
-    ("contacts.compute", "hash", "bucket_start", "H", 1, "r"),
-    ("contacts.compute", "hash", "bucket_count", "H", 1, "r"),
-    ("contacts.compute", "hash", "sorted_ids", "S", 1, "r"),
-    ("contacts.compute", "data", "body_pos", "N", 1, "r"),
-    ("contacts.compute", "data", "body_angle", "N", 1, "r"),
-    ("contacts.compute", "model", "body_vert_start", "N", 1, "r"),
-    ("contacts.compute", "model", "body_vert_count", "N", 1, "r"),
-    ("contacts.compute", "model", "vert_local", "V", 1, "r"),
-    ("contacts.compute", "data", "body_vel", "B", 1, "r"),
-    ("contacts.compute", "data", "body_omega", "B", 1, "r"),
-    ("contacts.compute", "data", "contact_count", "N", 2, "w"),  # read cur, write next
-    ("contacts.compute", "data", "contact_partner", "C", 2, "w"),
-    ("contacts.compute", "data", "contact_xi", "C", 2, "w"),
-    ("contacts.compute", "data", "contact_area", "C", 2, "w"),
-    ("contacts.compute", "data", "contact_elastic", "C", 2, "w"),
-    ("contacts.compute", "data", "contact_theta", "C", 2, "w"),  # rate-state only
-    ("contacts.compute", "data", "body_force_q", "B", 1, "rw"),
-    ("contacts.compute", "data", "body_torque_q", "B", 1, "rw"),
-    ("contacts.compute", "data", "body_energy", "O", 2, "rw"),
-    # Integration: forces -> velocities -> positions, work and drag.
-    ("integrator.advance", "data", "body_force_q", "N", 1, "rw"),
-    ("integrator.advance", "data", "body_torque_q", "N", 1, "rw"),
-    ("integrator.advance", "model", "body_probe", "N", 1, "r"),
-    ("integrator.advance", "model", "body_kind", "N", 1, "r"),
-    ("integrator.advance", "model", "body_force_ext", "N", 1, "r"),
-    ("integrator.advance", "model", "body_inv_mass", "N", 1, "r"),
-    ("integrator.advance", "model", "body_inv_inertia", "N", 1, "r"),
-    ("integrator.advance", "model", "body_drag", "N", 2, "r"),  # with water only
-    ("integrator.advance", "data", "body_vel", "N", 1, "rw"),
-    ("integrator.advance", "data", "body_omega", "N", 1, "rw"),
-    ("integrator.advance", "data", "body_pos", "N", 1, "rw"),
-    ("integrator.advance", "data", "body_angle", "N", 1, "rw"),
-    ("integrator.advance", "data", "body_energy", "N", 2, "rw"),
-)
-PER_BODY_UNITS = ("N", "S", "V", "H")  # the rest scale with the contacts
-
-
-def element_bytes(field) -> int:
-    """Bytes of one element of a Taichi scalar or vector field."""
-    from taichi.lang.util import to_numpy_type
-
-    lanes = getattr(field, "n", 1) * getattr(field, "m", 1)
-    return lanes * np.dtype(to_numpy_type(field.dtype)).itemsize
-
-
-def world_fields(world) -> dict[str, object]:
-    """Every Taichi field the World holds, as ``{'owner.name': field}``."""
-    from taichi.lang.field import Field
-
-    found: dict[str, object] = {}
-    seen: set[int] = set()
-    for owner, obj in vars(world).items():
-        for name, value in vars(obj).items() if hasattr(obj, "__dict__") else ():
-            if isinstance(value, Field) and id(value) not in seen:
-                seen.add(id(value))
-                found[f"{owner}.{name}"] = value
-    return found
+# The kernels of one step, by the name their times are reported under. The traffic of each
+# comes from the fields its stage declares it reads and writes (taichi_ice.schema): compulsory
+# traffic, each element counted once per launch (a body's data gathered again by each of its
+# neighbours is taken to hit the cache), so the bound is optimistic.
+STEP_STAGES = ("hash", "contacts", "integrator")
 
 
 def field_bytes(world) -> dict[str, int]:
-    """Bytes of the World's Taichi fields, per owner (model, data, hash, ...)."""
-    total: dict[str, int] = {}
-    for key, field in world_fields(world).items():
-        owner = key.split(".")[0]
-        total[owner] = total.get(owner, 0) + math.prod(field.shape) * element_bytes(field)
-    return total
+    """Bytes of the World's Taichi fields, per group (model, data, hash), from the schema."""
+    from taichi_ice import schema
+
+    sizes = schema.field_bytes(world.layout)
+    return {group: sum(sizes[v.name] for v in decls) for group, decls in schema.groups().items()}
 
 
 def traffic(world, contacts: float) -> dict:
-    """Bytes per step that ``TRAFFIC`` says each kernel moves, with ``contacts`` per step."""
-    layout = world.layout
-    n = layout.n_bodies
-    units = {
-        "N": n,
-        "S": layout.n_small,
-        "V": layout.n_verts,
-        "H": layout.hash_size,
-        "C": contacts,
-        "B": min(n, 2.0 * contacts),
-        "O": min(n, contacts),
-    }
-    fields = world_fields(world)
-    per_kernel: dict[str, float] = {}
-    per_body = per_contact = 0.0
-    for kernel, owner, name, unit, count, access in TRAFFIC:
-        if name == "contact_theta" and not layout.rate_state:
-            continue
-        if name == "body_drag" and not layout.water:
-            continue
-        size = count * element_bytes(fields[f"{owner}.{name}"]) * (2 if access == "rw" else 1)
-        per_kernel[kernel] = per_kernel.get(kernel, 0.0) + size * units[unit]
-        if unit in PER_BODY_UNITS:
-            per_body += size * units[unit] / n
-        else:
-            # B and O count up to two bodies and one owner per contact.
-            per_contact += size * {"C": 1.0, "B": 2.0, "O": 1.0}[unit]
+    """Bytes per step each kernel of the step must move with ``contacts`` contacts per step,
+    and the split into bytes per body and per contact."""
+    from taichi_ice import schema
+    from taichi_ice.world import STAGES
+
+    stages = {name: STAGES[name] for name in STEP_STAGES}
+    per_kernel = schema.traffic(stages, world.layout, contacts)
+    total = per_kernel.pop("total")
+    no_contacts = schema.traffic(stages, world.layout, 0.0)["total"]
+    one_contact = schema.traffic(stages, world.layout, 1.0)["total"]
     return {
-        "bytes_per_step": sum(per_kernel.values()),
+        "bytes_per_step": total,
         "bytes_per_kernel": per_kernel,
-        "bytes_per_body": per_body,
-        "bytes_per_contact": per_contact,
+        "bytes_per_body": no_contacts / world.layout.n_bodies,
+        "bytes_per_contact": one_contact - no_contacts,
     }
 
 
@@ -502,7 +411,7 @@ def run_size(blocks: int, args: argparse.Namespace) -> dict:
         "kernels_per_step": [name for name, _ in calls[: len(calls) // PROBE_STEPS]],
         "traffic": moved,
         "device_tasks": tasks,
-        "layout": {k: v for k, v in vars(world.layout).items() if k != "real"},
+        "layout": dataclasses.asdict(world.layout),
     }
     return {"row": row, "details": details}
 
@@ -778,7 +687,7 @@ def main(argv: list[str] | None = None) -> None:
         writer.writeheader()
         for row in rows:
             writer.writerow({k: f"{v:.6g}" if isinstance(v, float) else v for k, v in row.items()})
-    runs = [{**row, **d} for row, d in zip(rows, details, strict=True)]
+    runs = [{**row, **d} for row, d in zip(rows, details)]
     (args.out / "rubble_field.json").write_text(json.dumps({**meta, "runs": runs}, indent=2))
     if rows:
         plot(rows, meta, args.out / "rubble_field.png")

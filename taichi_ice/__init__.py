@@ -10,12 +10,26 @@ The same Taichi kernels run on the CPU and on a GPU.
     from taichi_ice import load_scenario, Simulation
     sim = Simulation(load_scenario("scenarios/pillar.toml"), friction=RateState())
     sim.run(until=20.0, out="runs/pillar_rs.h5")
+
+The scenes of ``scenarios/`` ship with the package: ``load_scenario("pillar")`` loads one from
+any directory.
+
+Taichi prints a banner when it is imported ("[Taichi] version ...") and a line when it starts
+("[Taichi] Starting on arch=..."); taichi-ice keeps both quiet. Set the environment variable
+``ENABLE_TAICHI_HEADER_PRINT=1`` to see them again.
 """
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
+# Before anything imports Taichi (several modules do at their top, and this package's
+# __init__ runs first): Taichi prints its banner at import unless this variable says not to.
+# A user's own setting wins; backend.init reads the same variable for the start-up line.
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+
+from ._version import __version__
 from .errors import (
     CapacityError,
     DivergenceError,
@@ -24,8 +38,6 @@ from .errors import (
     StabilityError,
     TaichiIceError,
 )
-
-__version__ = "0.1.0"
 
 __all__ = [
     "CapacityError",

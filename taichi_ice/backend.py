@@ -3,14 +3,27 @@
 Taichi holds one runtime per process. ``init`` starts it on first use and afterwards only
 checks that later callers ask for the same arch and precision; a different request is an
 error rather than a silent re-initialisation, which would free every field already built.
+
+``ti.init`` prints "[Taichi] Starting on arch=..." on every start; ``init`` drops that line
+unless the environment variable ``ENABLE_TAICHI_HEADER_PRINT`` asks for Taichi's messages (the
+variable that also governs Taichi's import banner; ``taichi_ice/__init__.py`` sets it to "0"
+unless the user set it).
 """
 
 from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
 
 ARCHES = ("cpu", "gpu", "cuda", "vulkan", "metal")
 PRECISIONS = ("f64", "f32")
 
 _current: tuple[str, str] | None = None
+
+# The line ti.init prints unconditionally (taichi/lang/misc.py, a plain print to stdout).
+_START_LINE = "[Taichi] Starting on arch="
 
 
 def real_dtype(precision: str):
@@ -49,14 +62,43 @@ def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> 
         )
     import taichi as ti
 
-    ti.init(
-        arch=getattr(ti, arch),
-        default_fp=ti.f64 if precision == "f64" else ti.f32,
-        default_ip=ti.i32,
-        log_level=ti.WARN,
-        offline_cache=True,
-    )
+    with _quiet_start():
+        ti.init(
+            arch=getattr(ti, arch),
+            default_fp=ti.f64 if precision == "f64" else ti.f32,
+            default_ip=ti.i32,
+            log_level=ti.WARN,
+            offline_cache=True,
+        )
     _current = wanted
+
+
+@contextlib.contextmanager
+def _quiet_start():
+    """Drop ti.init's start-up line from stdout, and pass everything else printed through.
+
+    Only Python's ``sys.stdout`` is captured: Taichi's warnings (an arch falling back to the
+    CPU) come from its C++ logger and still reach the terminal.
+    """
+    if _taichi_messages_wanted():
+        yield
+        return
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(captured):
+            yield
+    finally:
+        kept = [
+            line
+            for line in captured.getvalue().splitlines(keepends=True)
+            if not line.startswith(_START_LINE)
+        ]
+        sys.stdout.write("".join(kept))
+
+
+def _taichi_messages_wanted() -> bool:
+    """True when ENABLE_TAICHI_HEADER_PRINT is set and not false, read as Taichi reads it."""
+    return os.environ.get("ENABLE_TAICHI_HEADER_PRINT", "0").lower() not in ("false", "0", "f")
 
 
 def current() -> tuple[str, str] | None:

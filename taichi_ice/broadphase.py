@@ -11,33 +11,23 @@ wasted candidates, never a wrong or a duplicated pair.
 Large bodies (walls, pushers, anything bigger than ``h``) are not hashed: every body checks
 the few large bodies of its world directly (state.large_ids).
 
-Fields
-
-=============== ===== ============= ==============================================
-bucket_count    i32   H             bodies in each bucket this step
-bucket_start    i32   H             first entry of each bucket in sorted_ids
-bucket_fill     i32   H             scatter cursor while filling
-block_total     i32   H / SCAN      per-block totals of the two-level scan
-sorted_ids      i32   S             small body ids, grouped by bucket
-body_cell       ivec2 N             integer cell of each small body
-=============== ===== ============= ==============================================
+Its fields (``bucket_count``, ``bucket_start``, ``bucket_fill``, ``block_total``,
+``sorted_ids``, ``body_cell``) are declared in ``taichi_ice.schema`` (``HASH``).
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import ClassVar
+
 import taichi as ti
 
-from .state import Data, Layout, Model
+from . import schema
+from .schema import SCAN, Access, Layout, Stage
+from .state import Data, Fields, Model
 
-# Block length of the two-level prefix sum: each block is summed serially by one thread and
-# the H / SCAN block totals are scanned serially by one; both stay short on CPU and GPU.
-SCAN = 256
-
-
-def hash_size_for(n_small: int) -> int:
-    """Smallest power of two >= 2 n_small (at least SCAN): load factor below one half."""
-    return max(SCAN, 1 << int(np.ceil(np.log2(max(2 * n_small, 2)))))
+# SCAN (schema) is the block length of the two-level prefix sum: each block is summed
+# serially by one thread and the H / SCAN block totals are scanned serially by one; both
+# stay short on CPU and GPU.
 
 
 @ti.func
@@ -49,21 +39,39 @@ def bucket_of(cell, world, mask):
 
 
 @ti.data_oriented
-class SpatialHash:
+class SpatialHash(Fields, Stage):
     """Counting-sort spatial hash over the small bodies of every world."""
 
+    ACCESS: ClassVar[dict[str, Access]] = {
+        "build": Access(
+            reads=(
+                "body_small",
+                "body_world",
+                "body_pos",
+                "body_cell",
+                "bucket_count",
+                "bucket_start",
+                "bucket_fill",
+                "block_total",
+            ),
+            writes=(
+                "bucket_count",
+                "bucket_fill",
+                "body_cell",
+                "bucket_start",
+                "block_total",
+                "sorted_ids",
+            ),
+        )
+    }
+
     def __init__(self, layout: Layout, model: Model, data: Data):
-        self.layout, self.model, self.data = layout, model, data
+        super().__init__(layout, schema.groups()["hash"])
+        self.model, self.data = model, data
         h = layout.hash_size
         self.inv_cell = 1.0 / layout.cell_size
         self.mask = h - 1
-        self.n_blocks = (h + SCAN - 1) // SCAN
-        self.bucket_count = ti.field(ti.i32, shape=h)
-        self.bucket_start = ti.field(ti.i32, shape=h)
-        self.bucket_fill = ti.field(ti.i32, shape=h)
-        self.block_total = ti.field(ti.i32, shape=self.n_blocks)
-        self.sorted_ids = ti.field(ti.i32, shape=max(layout.n_small, 1))
-        self.body_cell = ti.Vector.field(2, ti.i32, shape=max(layout.n_bodies, 1))
+        self.n_blocks = layout.size("scan_blocks")
 
     @ti.func
     def cell_of(self, pos):

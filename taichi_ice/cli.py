@@ -11,7 +11,7 @@ import math
 import sys
 from pathlib import Path
 
-from . import __version__
+from ._version import __version__
 from .errors import TaichiIceError
 
 EXAMPLES = {
@@ -37,29 +37,16 @@ EXAMPLES = {
 
 
 def parse_friction(text: str):
-    """``coulomb``, ``coulomb:0.5``, ``rate-state`` or ``rate-state:A=0.05,t_c=2`` to a law."""
-    from .friction import Coulomb, RateState
+    """``--friction``: a law in its command-line form (``friction.parse_law``)."""
+    from .friction import LAWS, LawError, parse_law
 
-    name, _, args = text.partition(":")
-    name = name.strip().lower()
     try:
-        if name == "coulomb":
-            return Coulomb(float(args)) if args else Coulomb()
-        if name in ("rate-state", "ratestate", "rs"):
-            kw = {}
-            for item in filter(None, args.split(",")):
-                key, eq, value = item.partition("=")
-                if not eq:
-                    raise ValueError(f"expected KEY=VALUE, got {item!r}")
-                key = key.strip()
-                kw[key] = value.strip() if key == "method" else float(value)
-            return RateState(**kw)
-    except (TypeError, ValueError) as exc:
-        raise argparse.ArgumentTypeError(f"--friction {text!r}: {exc}") from None
-    raise argparse.ArgumentTypeError(
-        f"--friction {text!r}: unknown law; use coulomb, coulomb:MU, rate-state or "
-        "rate-state:A=..,B=..,mu0=..,v_star=..,t_c=..,method=.."
-    )
+        return parse_law(text)
+    except LawError as exc:
+        forms = "; ".join(
+            f"{name}[:{','.join(f'{k}=..' for k in law.keys())}]" for name, law in LAWS.items()
+        )
+        raise argparse.ArgumentTypeError(f"--friction {text!r}: {exc} (use {forms})") from None
 
 
 def parse_dt(text: str):

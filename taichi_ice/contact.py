@@ -22,6 +22,10 @@ dropped. More than K contacts raise the overflow status, which the simulation tu
 Forces are gathered in 64-bit fixed point (``state.FORCE_QUANTUM``), so a run is bit-for-bit
 reproducible on any number of threads and in any batch.
 
+The contact laws are pure functions, each twice (``taichi_ice``'s twin convention: the plain
+name is the NumPy reference, ``_ti`` the Taichi function): ``normal_force`` and
+``tangential_force``. The NumPy reference of a whole pair is ``reference.contact_force``.
+
 Energy: friction (slip), viscous (dashpots) go to the owner's ``body_energy`` row; the
 normal elastic energy of a contact is the work its elastic force ``k_e A`` has done on the
 approach, ``integral k_e A v_n dt``, so that the budget closes up to a residual that shrinks
@@ -30,21 +34,17 @@ with dt (for translation along the normal it is ``integral k_e A dA / L``).
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 
+import math
+from typing import ClassVar
+
 import taichi as ti
 
 from .broadphase import bucket_of
-from .friction import METHOD_EXPONENTIAL, rate_state_mu, slip_log, theta_equilibrium, theta_step
+from .codes import BodyEnergy, BodyKind, Status
+from .friction import rate_state_mu_ti, slip_log_ti, theta_equilibrium_ti, theta_step_ti
 from .geometry import overlap_ti
-from .state import (
-    BODY_FRICTION,
-    BODY_VISCOUS,
-    FORCE_QUANTUM,
-    KIND_DYNAMIC,
-    STATUS_SLOT_OVERFLOW,
-    Data,
-    Layout,
-    Model,
-)
+from .schema import Access, Layout, Stage
+from .state import FORCE_QUANTUM, Data, Model
 
 
 @ti.func
@@ -60,16 +60,44 @@ def perp(omega, r):
 
 
 @ti.func
-def normal_force(area, width, approach_speed, k_e, k_v):
-    """Hopkins normal force (N): elastic on the overlap area, viscous on the contact width.
-
-    Returns the force, clamped at zero (no tension), and its elastic part.
-    """
+def normal_force_ti(area, width, approach_speed, k_e, k_v):
+    """Taichi twin of :func:`normal_force`."""
     elastic = k_e * area
     return ti.max(elastic + k_v * width * approach_speed, 0.0), elastic
 
 
+def normal_force(area, width, approach_speed, k_e, k_v):
+    """Hopkins normal force (N): elastic on the overlap area, viscous on the contact width.
+
+    Args:
+        area: overlap area ``A`` (m^2). width: contact width ``L`` (m).
+        approach_speed: ``v_n``, positive when closing (m/s).
+        k_e: N/m per m of contact width. k_v: Pa s per m of contact width.
+
+    Returns:
+        ``(max(k_e A + k_v L v_n, 0), k_e A)``: the force, clamped at zero (no tension), and
+        its elastic part.
+    """
+    elastic = k_e * area
+    return max(elastic + k_v * width * approach_speed, 0.0), elastic
+
+
 @ti.func
+def tangential_force_ti(xi, slip_speed, dt, k_t, c_t, cap):
+    """Taichi twin of :func:`tangential_force`."""
+    trial = xi + slip_speed * dt
+    force = -k_t * trial - c_t * slip_speed
+    slip_work = 0.0
+    damp_work = c_t * slip_speed * slip_speed * dt
+    new_xi = trial
+    if ti.abs(force) > cap:
+        force = ti.math.sign(force) * cap
+        new_xi = (c_t * xi - force * dt) / (k_t * dt + c_t)
+        slip_work = cap * ti.abs(trial - new_xi)
+        damp_work = c_t * (new_xi - xi) * (new_xi - xi) / dt
+    return force, new_xi, slip_work, damp_work
+
+
 def tangential_force(xi, slip_speed, dt, k_t, c_t, cap):
     """Stick spring-dashpot capped at ``cap`` = mu F_n (Cundall and Strack 1979).
 
@@ -87,33 +115,97 @@ def tangential_force(xi, slip_speed, dt, k_t, c_t, cap):
     slip_work = 0.0
     damp_work = c_t * slip_speed * slip_speed * dt
     new_xi = trial
-    if ti.abs(force) > cap:
+    if abs(force) > cap:
         # Slip: the force is the cap and the spring-dashpot relaxes toward it over the step,
         # -k_t new_xi - c_t (new_xi - xi) / dt = force (backward Euler), the rest of the
         # displacement is sliding. (Setting new_xi = -force / k_t instead lets the dashpot's
         # share of the trial force flip or over-stretch the spring by 2 mu F_n / k_t in one
         # step, booking slip work that no force did: an energy error that dt does not shrink.)
-        force = ti.math.sign(force) * cap
+        force = math.copysign(cap, force)
         new_xi = (c_t * xi - force * dt) / (k_t * dt + c_t)
-        slip_work = cap * ti.abs(trial - new_xi)
+        slip_work = cap * abs(trial - new_xi)
         damp_work = c_t * (new_xi - xi) * (new_xi - xi) / dt
     return force, new_xi, slip_work, damp_work
 
 
 @ti.data_oriented
-class ContactStage:
+class ContactStage(Stage):
     """Finds overlapping pairs, applies contact forces and keeps contact memory."""
 
-    def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash, params: dict):
-        """
-        Args:
-            params: ``k_e`` (N/m^2), ``k_v`` (Pa s), ``method`` (friction.METHOD_* for
-                theta). The tangential ``k_t``, ``c_t`` are per world (model.world_tangential).
-        """
+    ACCESS: ClassVar[dict[str, Access]] = {
+        "compute": Access(
+            reads=(
+                # Model
+                "body_world",
+                "body_kind",
+                "body_small",
+                "body_radius",
+                "body_vert_start",
+                "body_vert_count",
+                "vert_local",
+                "world_large_start",
+                "large_ids",
+                "world_k_t",
+                "world_c_t",
+                "world_mu",
+                "world_A",
+                "world_B",
+                "world_mu0",
+                "world_v_star",
+                "world_t_c",
+                # Spatial hash
+                "body_cell",
+                "bucket_start",
+                "bucket_count",
+                "sorted_ids",
+                # Data in
+                "time_step",
+                "body_pos",
+                "body_angle",
+                "body_vel",
+                "body_omega",
+                "contact_count",
+                "contact_partner",
+                "contact_xi",
+                "contact_elastic",
+                "contact_theta",
+                "body_force_q",
+                "body_torque_q",
+                "body_energy",
+                "status",
+            ),
+            writes=(
+                "contact_count",
+                "contact_partner",
+                "contact_xi",
+                "contact_area",
+                "contact_elastic",
+                "contact_theta",
+                "body_force_q",
+                "body_torque_q",
+                "body_energy",
+                "status",
+            ),
+            per_contact=(
+                "body_vel",
+                "body_omega",
+                "contact_partner",
+                "contact_xi",
+                "contact_area",
+                "contact_elastic",
+                "contact_theta",
+                "body_force_q",
+                "body_torque_q",
+                "body_energy",
+            ),
+        )
+    }
+
+    def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash):
         self.layout, self.model, self.data, self.hash = layout, model, data, spatial_hash
-        self.k_e = float(params["k_e"])
-        self.k_v = float(params["k_v"])
-        self.method = int(params.get("method", METHOD_EXPONENTIAL))
+        self.k_e = float(layout.contact_stiffness)
+        self.k_v = float(layout.contact_viscosity)
+        self.method = int(layout.theta_method)
         self.maxv = layout.max_verts
         # Bodies whose bounding circles meet a body's: more than its slots are possible
         # (near misses), so the candidate list is twice as long.
@@ -171,29 +263,25 @@ class ContactStage:
             tangent = ti.Vector([-normal[1], normal[0]])
             approach = -v_rel.dot(normal)
             slip = v_rel.dot(tangent)
-            f_n, f_el = normal_force(area, width, approach, self.k_e, self.k_v)
+            f_n, f_el = normal_force_ti(area, width, approach, self.k_e, self.k_v)
 
             mu = 0.0
             theta_new = 0.0
             w = m.body_world[i]
             if ti.static(self.layout.rate_state):
-                a_, b_, mu0 = (
-                    m.world_rate_state[w, 0],
-                    m.world_rate_state[w, 1],
-                    m.world_rate_state[w, 2],
-                )
-                v_star, t_c = m.world_rate_state[w, 3], m.world_rate_state[w, 4]
-                x = slip_log(ti.abs(slip), v_star)
-                theta = theta_equilibrium(x, b_)
+                a_, b_, mu0 = m.world_A[w], m.world_B[w], m.world_mu0[w]
+                v_star, t_c = m.world_v_star[w], m.world_t_c[w]
+                x = slip_log_ti(ti.abs(slip), v_star)
+                theta = theta_equilibrium_ti(x, b_)
                 if found >= 0:
                     theta = d.contact_theta[cur, i, found]
-                mu = rate_state_mu(theta, x, a_, mu0)
-                theta_new = theta_step(theta, x, x, x, dt, b_, t_c, ti.static(self.method))
+                mu = rate_state_mu_ti(theta, x, a_, mu0)
+                theta_new = theta_step_ti(theta, x, x, x, dt, b_, t_c, ti.static(self.method))
             else:
                 mu = m.world_mu[w]
 
-            f_t, xi_new, slip_work, damp_work = tangential_force(
-                xi, slip, dt, m.world_tangential[w, 0], m.world_tangential[w, 1], mu * f_n
+            f_t, xi_new, slip_work, damp_work = tangential_force_ti(
+                xi, slip, dt, m.world_k_t[w], m.world_c_t[w], mu * f_n
             )
             force = f_n * normal + f_t * tangent  # on j; -force on i
             self.add_force(j, force, cross2(r_j, force))
@@ -205,8 +293,8 @@ class ContactStage:
             # centroid where the force acts, and the budget kept an error dt does not
             # shrink.)
             elastic += f_el * approach * dt
-            d.body_energy[i, BODY_FRICTION] += slip_work
-            d.body_energy[i, BODY_VISCOUS] += (f_n - f_el) * approach * dt + damp_work
+            d.body_energy[i, BodyEnergy.FRICTION] += slip_work
+            d.body_energy[i, BodyEnergy.VISCOUS] += (f_n - f_el) * approach * dt + damp_work
 
             if used < self.layout.slots:
                 d.contact_partner[nxt, i, used] = j
@@ -222,7 +310,7 @@ class ContactStage:
     def owns(self, i, j):
         """True if body i handles the pair (i, j) found from both sides in the hash."""
         kind = ti.static(self.model.body_kind)
-        dyn_i, dyn_j = kind[i] == KIND_DYNAMIC, kind[j] == KIND_DYNAMIC
+        dyn_i, dyn_j = kind[i] == BodyKind.DYNAMIC, kind[j] == BodyKind.DYNAMIC
         return (dyn_i and not dyn_j) or (dyn_i == dyn_j and dyn_i and i < j)
 
     @ti.func
@@ -262,7 +350,7 @@ class ContactStage:
             cand = ti.Vector.zero(ti.i32, self.n_cand)
             n = 0
             w = m.body_world[i]
-            dyn_i = m.body_kind[i] == KIND_DYNAMIC
+            dyn_i = m.body_kind[i] == BodyKind.DYNAMIC
             if m.body_small[i] and dyn_i:
                 c = h.body_cell[i]
                 for nb in range(9):
@@ -284,7 +372,7 @@ class ContactStage:
                             n += 1
             for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
                 j = m.large_ids[g]
-                dyn_j = m.body_kind[j] == KIND_DYNAMIC
+                dyn_j = m.body_kind[j] == BodyKind.DYNAMIC
                 # Small dynamic bodies own their contacts with large ones; a small fixed or
                 # kinematic body (a pillar) those with large dynamic bodies; large bodies
                 # among themselves the lower id, if either moves freely.
@@ -308,4 +396,4 @@ class ContactStage:
             need = used
             if n > self.n_cand:
                 need = ti.max(need, n)
-            ti.atomic_max(d.status[STATUS_SLOT_OVERFLOW], need)
+            ti.atomic_max(d.status[Status.SLOT_OVERFLOW], need)

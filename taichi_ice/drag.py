@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import taichi as ti
 
 
@@ -40,15 +41,21 @@ def drag_coefficients(
 
 
 @ti.func
-def water_drag(vel, omega, c_lin, c_rot):
-    """Drag force (N) and torque (N m) on a floe moving at ``vel`` (m/s), ``omega`` (rad/s)."""
+def water_drag_ti(vel, omega, c_lin, c_rot):
+    """Taichi twin of :func:`water_drag` for one body (2-vector ``vel``)."""
     return -c_lin * vel.norm() * vel, -c_rot * ti.abs(omega) * omega
 
 
-def water_drag_np(vel, omega, c_lin, c_rot):
-    """NumPy twin of ``water_drag`` for arrays of bodies: vel (N, 2), omega (N,)."""
-    import numpy as np
+def water_drag(vel, omega, c_lin, c_rot):
+    """Drag force (N) and torque (N m) on floes moving at ``vel`` (m/s), ``omega`` (rad/s).
 
+    Args:
+        vel: ``(N, 2)`` velocities. omega: ``(N,)`` angular velocities.
+        c_lin: ``(N,)`` kg/m. c_rot: ``(N,)`` kg m^2 (``drag_coefficients``).
+
+    Returns:
+        ``(force (N, 2), torque (N,))``.
+    """
     vel = np.asarray(vel, dtype=np.float64)
     speed = np.linalg.norm(vel, axis=-1, keepdims=True)
     return -np.asarray(c_lin)[..., None] * speed * vel, -np.asarray(c_rot) * np.abs(omega) * omega

@@ -1,6 +1,6 @@
-"""Energy budget of every world: snapshots of kinetic and elastic energy, sums of the rest.
+"""The energy stage: every world's energy table, from the per-body and per-contact terms.
 
-    work_in = kinetic + elastic + friction + viscous + drag + residual
+    work_in = kinetic + elastic + friction + viscous + drag + residual   (``taichi_ice.budget``)
 
 ``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
 of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water;
@@ -12,29 +12,37 @@ reproducible.
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 
+from typing import ClassVar
+
 import taichi as ti
 
-from .state import (
-    BODY_DRAG,
-    BODY_FRICTION,
-    BODY_VISCOUS,
-    BODY_WORK,
-    ENERGY_DRAG,
-    ENERGY_ELASTIC,
-    ENERGY_FRICTION,
-    ENERGY_KINETIC,
-    ENERGY_VISCOUS,
-    ENERGY_WORK_IN,
-    KIND_DYNAMIC,
-    Data,
-    Layout,
-    Model,
-)
+from .codes import BodyEnergy, BodyKind, EnergyTerm
+from .schema import Access, Layout, Stage
+from .state import Data, Model
 
 
 @ti.data_oriented
-class EnergyMeter:
+class EnergyMeter(Stage):
     """Fills ``data.world_energy`` on demand (at output times, not every step)."""
+
+    ACCESS: ClassVar[dict] = {
+        "snapshot": Access(
+            reads=(
+                "world_body_start",
+                "world_k_t",
+                "body_kind",
+                "body_mass",
+                "body_inertia",
+                "body_vel",
+                "body_omega",
+                "contact_count",
+                "contact_xi",
+                "contact_elastic",
+                "body_energy",
+            ),
+            writes=("world_energy",),
+        )
+    }
 
     def __init__(self, layout: Layout, model: Model, data: Data):
         self.layout, self.model, self.data = layout, model, data
@@ -50,9 +58,9 @@ class EnergyMeter:
             viscous = ti.cast(0.0, ti.f64)
             drag = ti.cast(0.0, ti.f64)
             work = ti.cast(0.0, ti.f64)
-            k_t = ti.cast(m.world_tangential[w, 0], ti.f64)
+            k_t = ti.cast(m.world_k_t[w], ti.f64)
             for i in range(m.world_body_start[w], m.world_body_start[w + 1]):
-                if m.body_kind[i] == KIND_DYNAMIC:
+                if m.body_kind[i] == BodyKind.DYNAMIC:
                     kinetic += 0.5 * ti.cast(
                         m.body_mass[i] * d.body_vel[i].norm_sqr()
                         + m.body_inertia[i] * d.body_omega[i] ** 2,
@@ -61,13 +69,13 @@ class EnergyMeter:
                 for s in range(d.contact_count[cur, i]):
                     xi = ti.cast(d.contact_xi[cur, i, s], ti.f64)
                     elastic += ti.cast(d.contact_elastic[cur, i, s], ti.f64) + 0.5 * k_t * xi * xi
-                friction += d.body_energy[i, BODY_FRICTION]
-                viscous += d.body_energy[i, BODY_VISCOUS]
-                drag += d.body_energy[i, BODY_DRAG]
-                work += d.body_energy[i, BODY_WORK]
-            d.world_energy[w, ENERGY_KINETIC] = kinetic
-            d.world_energy[w, ENERGY_ELASTIC] = elastic
-            d.world_energy[w, ENERGY_FRICTION] = friction
-            d.world_energy[w, ENERGY_VISCOUS] = viscous
-            d.world_energy[w, ENERGY_DRAG] = drag
-            d.world_energy[w, ENERGY_WORK_IN] = work
+                friction += d.body_energy[i, BodyEnergy.FRICTION]
+                viscous += d.body_energy[i, BodyEnergy.VISCOUS]
+                drag += d.body_energy[i, BodyEnergy.DRAG]
+                work += d.body_energy[i, BodyEnergy.WORK]
+            d.world_energy[w, EnergyTerm.KINETIC] = kinetic
+            d.world_energy[w, EnergyTerm.ELASTIC] = elastic
+            d.world_energy[w, EnergyTerm.FRICTION] = friction
+            d.world_energy[w, EnergyTerm.VISCOUS] = viscous
+            d.world_energy[w, EnergyTerm.DRAG] = drag
+            d.world_energy[w, EnergyTerm.WORK_IN] = work

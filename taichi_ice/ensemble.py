@@ -33,11 +33,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from . import budget
 from .errors import TaichiIceError
 from .simulation import RunResult
 
@@ -56,25 +57,6 @@ METRICS = (
 # A jam counts as released when the probe force over the last window is below this fraction
 # of its peak.
 RELEASED_FRACTION = 0.1
-
-
-def law_label(law) -> str:
-    """Short name of a friction law for files and legends: ``mu0.5``, ``rate-state``."""
-    from .friction import Coulomb, RateState
-
-    if isinstance(law, Coulomb):
-        return f"mu{law.mu:g}"
-    if isinstance(law, RateState):
-        default = RateState(method=law.method)
-        if law.to_dict() == default.to_dict():
-            return "rate-state"
-        changed = {
-            k: v
-            for k, v in law.to_dict().items()
-            if k not in ("law", "method") and v != default.to_dict()[k]
-        }
-        return "rate-state_" + "_".join(f"{k}{v:g}" for k, v in changed.items())
-    raise TypeError(f"friction must be a Coulomb or RateState, got {type(law).__name__}")
 
 
 def probe_force_magnitude(series: dict) -> np.ndarray:
@@ -105,13 +87,11 @@ def concentration(time: np.ndarray, energy: np.ndarray, window: float = 1.0) -> 
 
 def run_metrics(series: dict, window: float = 1.0) -> dict[str, float]:
     """The metrics of one run (see the module docstring) from its ``/series`` arrays."""
-    from .simulation import energy_residual
-
     t = np.asarray(series["time"])
     force = probe_force_magnitude(series)
     touching = np.nonzero(force > 0)[0]
-    residual = float(energy_residual(series)[-1])
-    came_in = series["kinetic_energy"][0] + series["elastic_energy"][0] + series["work_in"][-1]
+    residual = float(budget.residual(series)[-1])
+    came_in = float(budget.came_in(series)[-1])
     peak = float(force.max()) if force.size else 0.0
     last = t >= t[-1] - window
     last[0] = False  # t = 0 carries no impulse
@@ -131,7 +111,7 @@ def run_metrics(series: dict, window: float = 1.0) -> dict[str, float]:
     }
 
 
-@dataclass(kw_only=True)
+@dataclass
 class EnsembleResult(RunResult):
     """One law over many seeds: a RunResult (series, paths, steps, dt, wall time, status,
     failure: per world, in ``seeds`` order) with the law's label and each world's metrics.
@@ -140,9 +120,11 @@ class EnsembleResult(RunResult):
     every world had reached, and ``failure`` says why.
     """
 
-    label: str
-    seeds: list[int]
-    metrics: list[dict[str, float]]
+    # Defaults only because RunResult's fields have them (kw_only= needs Python 3.10);
+    # run_ensemble always passes all three.
+    label: str = ""
+    seeds: list[int] = field(default_factory=list)
+    metrics: list[dict[str, float]] = field(default_factory=list)
 
     def values(self, name: str) -> np.ndarray:
         """``(n_seeds,)`` one metric over the seeds."""
@@ -213,7 +195,7 @@ def run_ensemble(
     if friction is not None:
         scene = scene.with_friction(friction)
     scenes = [scene.reseeded(s) for s in seeds]
-    if isinstance(out, str | Path):
+    if isinstance(out, (str, Path)):
         width = max(4, len(str(max(seeds))))
         out = [Path(out) / f"seed-{s:0{width}d}.h5" for s in seeds]
     sim = Simulation(scenes, arch=arch, precision=precision, dt=dt, slots=slots)
@@ -223,7 +205,7 @@ def run_ensemble(
         result = exc.result
     return EnsembleResult(
         **vars(result),
-        label=law_label(scene.friction),
+        label=scene.friction.label,
         seeds=seeds,
         metrics=[run_metrics(s, window) for s in result.series],
     )
@@ -258,7 +240,7 @@ def ensemble_command(
     seeds = [scene.simulation.seed + k for k in range(n_seeds)]
     results: dict[str, EnsembleResult] = {}
     for law in laws:
-        label = law_label(law if law is not None else scene.friction)
+        label = (law if law is not None else scene.friction).label
         if label in results:
             raise ValueError(f"--friction {label} given twice")
         if progress:
@@ -304,7 +286,7 @@ def ensemble_command(
         writer = csv.writer(f)
         writer.writerow(["law", "seed", *METRICS])
         for label, ens in results.items():
-            for seed, m in zip(ens.seeds, ens.metrics, strict=True):
+            for seed, m in zip(ens.seeds, ens.metrics):
                 writer.writerow([label, seed, *(m[k] for k in METRICS)])
     plot_spread(results, out / "ensemble.png")
     print(f"wrote {out}/ensemble.json, ensemble.csv, ensemble.png and the runs")

@@ -11,6 +11,7 @@ from typing import NamedTuple
 import numpy as np
 import taichi as ti
 
+from .codes import OverlapKind
 from .errors import PolygonError
 
 # Relative tolerance for convexity and degeneracy checks: a vertex whose turn is below this
@@ -128,10 +129,7 @@ def transform(vertices: np.ndarray, position, angle: float) -> np.ndarray:
 # Overlap of two convex polygons (Hopkins 1992 contact geometry)
 # ---------------------------------------------------------------------------------------------
 
-# Values of ``Overlap.kind``.
-OVERLAP_NONE = 0  # separated or touching: no contact, every other field is zero
-OVERLAP_CHORD = 1  # the boundaries cross exactly twice: normal and width from that chord
-OVERLAP_FALLBACK = 2  # containment, collinear edges or more than two crossings: SAT axis
+# ``Overlap.kind`` is a ``codes.OverlapKind``: NONE, CHORD or FALLBACK.
 
 
 class Overlap(NamedTuple):
@@ -143,9 +141,9 @@ class Overlap(NamedTuple):
         normal: ``(2,)`` unit contact normal, pointing out of ``p`` into ``q``.
         width: contact width ``L``, the length of the chord between the two points where
             the boundaries cross (m); see :func:`overlap` for the fallback.
-        kind: ``OVERLAP_NONE``, ``OVERLAP_CHORD`` or ``OVERLAP_FALLBACK``.
+        kind: ``OverlapKind.NONE``, ``CHORD`` or ``FALLBACK``.
 
-    :func:`overlap_batch` returns the same fields as arrays with a leading batch axis.
+    :func:`overlap_batch_ti` returns the same fields as arrays with a leading batch axis.
     """
 
     area: float
@@ -325,7 +323,7 @@ def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
     perpendicular, which points to the side where the boundary of ``p`` lies inside ``q``,
     i.e. out of ``p`` into ``q``.
 
-    Fallback (``kind == OVERLAP_FALLBACK``) when there are not exactly one entry and one
+    Fallback (``kind == OverlapKind.FALLBACK``) when there are not exactly one entry and one
     exit: the normal is the separating-axis minimum-penetration axis over both polygons'
     edge normals (:func:`min_penetration_axis`, oriented ``p -> q``) and the width is the
     extent of the intersection polygon across that normal. Why this is continuous enough for
@@ -347,12 +345,12 @@ def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
 
     Returns:
         An :class:`Overlap`. Separated or touching polygons (SAT depth ``<= 0`` or zero
-        clipped area) give ``kind == OVERLAP_NONE`` with zero area, centroid, normal and
+        clipped area) give ``kind == OverlapKind.NONE`` with zero area, centroid, normal and
         width.
     """
     p = np.asarray(p, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
-    none = Overlap(0.0, np.zeros(2), np.zeros(2), 0.0, OVERLAP_NONE)
+    none = Overlap(0.0, np.zeros(2), np.zeros(2), 0.0, OverlapKind.NONE)
     depth, axis = min_penetration_axis(p, q)
     if depth <= 0.0:
         return none
@@ -367,10 +365,10 @@ def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
         width = float(np.hypot(chord[0], chord[1]))
         if width > 0.0:
             normal = np.array([-chord[1], chord[0]]) / width
-            return Overlap(area, centroid, normal, width, OVERLAP_CHORD)
+            return Overlap(area, centroid, normal, width, OverlapKind.CHORD)
     tangent = np.array([-axis[1], axis[0]])
     along = poly @ tangent
-    return Overlap(area, centroid, axis, float(along.max() - along.min()), OVERLAP_FALLBACK)
+    return Overlap(area, centroid, axis, float(along.max() - along.min()), OverlapKind.FALLBACK)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -508,14 +506,14 @@ def overlap_ti(p, n_p, q, n_q):
     Returns:
         ``(area, centroid, normal, width, kind)``: area (m^2), centroid (2-vector, m),
         unit normal from ``p`` into ``q`` (2-vector), contact width (m) and kind
-        (``OVERLAP_NONE``, ``OVERLAP_CHORD`` or ``OVERLAP_FALLBACK``), as in :class:`Overlap`;
+        (``OverlapKind.NONE``, ``CHORD`` or ``FALLBACK``), as in :class:`Overlap`;
         all zero for a separated pair.
     """
     area = 0.0
     centroid = ti.math.vec2(0.0, 0.0)
     normal = ti.math.vec2(0.0, 0.0)
     width = 0.0
-    kind = OVERLAP_NONE
+    kind = OverlapKind.NONE
     depth, axis = min_penetration_axis_ti(p, n_p, q, n_q)
     if depth > 0.0:
         buf, start, count = _clip_ti(p, n_p, q, n_q)
@@ -558,11 +556,11 @@ def overlap_ti(p, n_p, q, n_q):
             chord = enter - leave
             chord_length = chord.norm()
             if crossings == 2 and entering_count == 1 and chord_length > 0.0:
-                kind = OVERLAP_CHORD
+                kind = OverlapKind.CHORD
                 width = chord_length
                 normal = ti.math.vec2(-chord[1], chord[0]) / chord_length
             else:
-                kind = OVERLAP_FALLBACK
+                kind = OverlapKind.FALLBACK
                 normal = axis
                 tangent = ti.math.vec2(-axis[1], axis[0])
                 lo = ti.math.dot(tangent, origin)
@@ -573,110 +571,3 @@ def overlap_ti(p, n_p, q, n_q):
                     hi = ti.max(hi, s)
                 width = hi - lo
     return area, centroid, normal, width, kind
-
-
-@ti.kernel
-def _overlap_batch_kernel(
-    # In:
-    p_in: ti.types.ndarray(ndim=3),
-    n_p_in: ti.types.ndarray(ndim=1),
-    q_in: ti.types.ndarray(ndim=3),
-    n_q_in: ti.types.ndarray(ndim=1),
-    maxv_p: ti.template(),
-    maxv_q: ti.template(),
-    # Out:
-    area_out: ti.types.ndarray(ndim=1),
-    centroid_out: ti.types.ndarray(ndim=2),
-    normal_out: ti.types.ndarray(ndim=2),
-    width_out: ti.types.ndarray(ndim=1),
-    kind_out: ti.types.ndarray(ndim=1),
-    depth_out: ti.types.ndarray(ndim=1),
-    axis_out: ti.types.ndarray(ndim=2),
-    separated_out: ti.types.ndarray(ndim=1),
-):
-    for b in range(area_out.shape[0]):
-        # The gather the contact kernel does: vertices into fixed-size local matrices.
-        p = ti.Matrix.zero(float, maxv_p, 2)
-        q = ti.Matrix.zero(float, maxv_q, 2)
-        for k in range(n_p_in[b]):
-            p[k, 0] = p_in[b, k, 0]
-            p[k, 1] = p_in[b, k, 1]
-        for k in range(n_q_in[b]):
-            q[k, 0] = q_in[b, k, 0]
-            q[k, 1] = q_in[b, k, 1]
-        area, centroid, normal, width, kind = overlap_ti(p, n_p_in[b], q, n_q_in[b])
-        depth, axis = min_penetration_axis_ti(p, n_p_in[b], q, n_q_in[b])
-        area_out[b] = area
-        width_out[b] = width
-        kind_out[b] = kind
-        depth_out[b] = depth
-        separated_out[b] = ti.cast(sat_separated_ti(p, n_p_in[b], q, n_q_in[b]), ti.i32)
-        for d in ti.static(range(2)):
-            centroid_out[b, d] = centroid[d]
-            normal_out[b, d] = normal[d]
-            axis_out[b, d] = axis[d]
-
-
-class BatchOverlap(NamedTuple):
-    """Results of :func:`overlap_batch` for B pairs: the :class:`Overlap` fields, batched.
-
-    Attributes:
-        area: ``(B,)`` m^2. centroid: ``(B, 2)`` m. normal: ``(B, 2)``. width: ``(B,)`` m.
-        kind: ``(B,)`` int32. depth: ``(B,)`` SAT minimum penetration (m). axis: ``(B, 2)``
-        its unit axis, ``p -> q``. separated: ``(B,)`` bool, the SAT verdict.
-    """
-
-    area: np.ndarray
-    centroid: np.ndarray
-    normal: np.ndarray
-    width: np.ndarray
-    kind: np.ndarray
-    depth: np.ndarray
-    axis: np.ndarray
-    separated: np.ndarray
-
-
-def overlap_batch(p, n_p, q, n_q) -> BatchOverlap:
-    """Run :func:`overlap_ti` (and the SAT functions) on B pairs at once, for tests and benchmarks.
-
-    Starts Taichi on the CPU in float64 if nothing has started it yet; otherwise runs on the
-    arch and precision already chosen, with inputs cast to that precision.
-
-    Args:
-        p: ``(B, P, 2)`` vertices of the first polygons (m), rows past ``n_p[b]`` ignored.
-        n_p: ``(B,)`` vertex counts of ``p`` (3 <= n_p <= P).
-        q: ``(B, Q, 2)`` vertices of the second polygons (m).
-        n_q: ``(B,)`` vertex counts of ``q`` (3 <= n_q <= Q).
-
-    Returns:
-        A :class:`BatchOverlap` of NumPy arrays.
-    """
-    from . import backend
-
-    if backend.current() is None:
-        backend.init()
-    real = backend.real_dtype(backend.current()[1])
-    p = np.ascontiguousarray(p, dtype=real)
-    q = np.ascontiguousarray(q, dtype=real)
-    n_p = np.ascontiguousarray(n_p, dtype=np.int32)
-    n_q = np.ascontiguousarray(n_q, dtype=np.int32)
-    batch = p.shape[0]
-    if p.ndim != 3 or q.ndim != 3 or p.shape[2] != 2 or q.shape[2] != 2:
-        raise ValueError(f"p and q must be (B, MAXV, 2) arrays, got {p.shape} and {q.shape}")
-    if q.shape[0] != batch or n_p.shape != (batch,) or n_q.shape != (batch,):
-        raise ValueError("p, n_p, q and n_q must have the same batch length B")
-    if np.any(n_p < 3) or np.any(n_p > p.shape[1]) or np.any(n_q < 3) or np.any(n_q > q.shape[1]):
-        raise ValueError("vertex counts must lie between 3 and the padded size of p and q")
-    out = BatchOverlap(
-        area=np.zeros(batch, real),
-        centroid=np.zeros((batch, 2), real),
-        normal=np.zeros((batch, 2), real),
-        width=np.zeros(batch, real),
-        kind=np.zeros(batch, np.int32),
-        depth=np.zeros(batch, real),
-        axis=np.zeros((batch, 2), real),
-        separated=np.zeros(batch, np.int32),
-    )
-    if batch:
-        _overlap_batch_kernel(p, n_p, q, n_q, p.shape[1], q.shape[1], *out)
-    return out._replace(separated=out.separated.astype(bool))

@@ -14,34 +14,60 @@ step, accumulates probe impulses, and raises the non-finite and runaway flags.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import taichi as ti
 
-from .drag import water_drag
-from .state import (
-    BODY_DRAG,
-    BODY_WORK,
-    FORCE_QUANTUM,
-    KIND_DYNAMIC,
-    KIND_KINEMATIC,
-    STATUS_NONFINITE,
-    STATUS_RUNAWAY,
-    Data,
-    Layout,
-    Model,
-)
+from .codes import BodyEnergy, BodyKind, Status
+from .drag import water_drag_ti
+from .schema import Access, Layout, Stage
+from .state import FORCE_QUANTUM, Data, Model
 
 
 @ti.data_oriented
-class Integrator:
+class Integrator(Stage):
     """Advances every body by one step."""
 
-    def __init__(self, layout: Layout, model: Model, data: Data, runaway_speed: float):
-        """
-        Args:
-            runaway_speed: a dynamic body faster than this (m/s) flags the run as divergent.
-        """
+    ACCESS: ClassVar[dict[str, Access]] = {
+        "advance": Access(
+            reads=(
+                # Model
+                "body_probe",
+                "body_kind",
+                "body_force_ext",
+                "body_drag_linear",
+                "body_drag_rotational",
+                "body_inv_mass",
+                "body_inv_inertia",
+                # Data in
+                "time_step",
+                "body_force_q",
+                "body_torque_q",
+                "probe_impulse",
+                "body_vel",
+                "body_omega",
+                "body_pos",
+                "body_angle",
+                "body_energy",
+            ),
+            writes=(
+                "body_force_q",
+                "body_torque_q",
+                "probe_impulse",
+                "body_vel",
+                "body_omega",
+                "body_pos",
+                "body_angle",
+                "body_energy",
+                "status",
+            ),
+        )
+    }
+
+    def __init__(self, layout: Layout, model: Model, data: Data):
         self.layout, self.model, self.data = layout, model, data
-        self.runaway_speed = float(runaway_speed)
+        # A dynamic body faster than this (m/s) flags the run as diverged (assemble).
+        self.runaway_speed = float(layout.runaway_speed)
 
     @ti.kernel
     def advance(self):
@@ -54,33 +80,36 @@ class Integrator:
             d.body_torque_q[i] = 0
             p = m.body_probe[i]
             if p >= 0:
-                d.probe_impulse[p, 0] += ti.cast(f[0] * dt, ti.f64)
-                d.probe_impulse[p, 1] += ti.cast(f[1] * dt, ti.f64)
+                d.probe_impulse[p] += ti.cast(f * dt, ti.f64)
             kind = m.body_kind[i]
-            if kind == KIND_DYNAMIC:
+            if kind == BodyKind.DYNAMIC:
                 v0, w0 = d.body_vel[i], d.body_omega[i]
                 f_ext = m.body_force_ext[i]
                 f_drag = ti.Vector([0.0, 0.0], self.layout.real)
                 t_drag = ti.cast(0.0, self.layout.real)
                 if ti.static(self.layout.water):
-                    f_drag, t_drag = water_drag(v0, w0, m.body_drag[i, 0], m.body_drag[i, 1])
+                    f_drag, t_drag = water_drag_ti(
+                        v0, w0, m.body_drag_linear[i], m.body_drag_rotational[i]
+                    )
                 v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
                 w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
                 vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
-                d.body_energy[i, BODY_DRAG] += ti.cast(-(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64)
-                d.body_energy[i, BODY_WORK] += ti.cast(f_ext.dot(vm) * dt, ti.f64)
+                d.body_energy[i, BodyEnergy.DRAG] += ti.cast(
+                    -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
+                )
+                d.body_energy[i, BodyEnergy.WORK] += ti.cast(f_ext.dot(vm) * dt, ti.f64)
                 d.body_vel[i] = v1
                 d.body_omega[i] = w1
                 d.body_pos[i] += dt * v1
                 d.body_angle[i] += dt * w1
                 speed2 = v1.norm_sqr()
                 if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
-                    d.status[STATUS_NONFINITE] = 1
+                    d.status[Status.NONFINITE] = 1
                 elif speed2 > self.runaway_speed * self.runaway_speed:
-                    d.status[STATUS_RUNAWAY] = 1
-            elif kind == KIND_KINEMATIC:
+                    d.status[Status.RUNAWAY] = 1
+            elif kind == BodyKind.KINEMATIC:
                 # The contact force f acts on the pusher; the pusher does -f.v on the rest.
                 v, w = d.body_vel[i], d.body_omega[i]
-                d.body_energy[i, BODY_WORK] += ti.cast(-(f.dot(v) + tau * w) * dt, ti.f64)
+                d.body_energy[i, BodyEnergy.WORK] += ti.cast(-(f.dot(v) + tau * w) * dt, ti.f64)
                 d.body_pos[i] += dt * v
                 d.body_angle[i] += dt * w

@@ -29,16 +29,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import __version__
-
-SERIES_ENERGY = (
-    "friction_energy",
-    "viscous_energy",
-    "drag_energy",
-    "work_in",
-    "kinetic_energy",
-    "elastic_energy",
-)  # in the order of state.ENERGY_* indices
+from . import budget
+from ._version import __version__
 
 
 class RunWriter:
@@ -84,7 +76,7 @@ class RunWriter:
             "probe_force": _growing(s, "probe_force", (p, 2)),
             "n_contacts": _growing(s, "n_contacts", (), dtype=np.int64),
         }
-        for name in SERIES_ENERGY:
+        for name in budget.SERIES:
             self.series[name] = _growing(s, name, ())
         fr = f.create_group("frames")
         self.frames = {
@@ -98,9 +90,9 @@ class RunWriter:
         f.flush()
 
     def add_sample(self, time: float, probe_force, energies, n_contacts: int) -> None:
-        """One time-series row: probe_force (P, 2) N, energies in SERIES_ENERGY order (J)."""
+        """One time-series row: probe_force (P, 2) N, energies in budget.SERIES order (J)."""
         row = {"time": time, "probe_force": probe_force, "n_contacts": n_contacts}
-        row.update(zip(SERIES_ENERGY, energies, strict=True))
+        row.update(zip(budget.SERIES, energies))
         for name, value in row.items():
             _append(self.series[name], value)
 

@@ -25,6 +25,7 @@ import json
 import math
 import sys
 import time
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,8 @@ import numpy as np
 from .ensemble import EnsembleResult, probe_force_magnitude, run_ensemble
 from .plots import plot_spread
 
-DEFAULT_SCENE = Path(__file__).resolve().parent.parent / "scenarios" / "pillar.toml"
+# The bundled scene (package data), so that the command works from an installed wheel.
+DEFAULT_SCENE = resources.files("taichi_ice").joinpath("scenarios").joinpath("pillar.toml")
 
 MODEL_COLOURS = {"mu0.1": "C0", "mu0.5": "C1", "mu0.9": "C3", "rate-state": "C2"}
 MODEL_TITLES = {
@@ -245,8 +247,7 @@ def findings(results: dict[str, EnsembleResult]) -> list[dict]:
             (p9 > p5) & (p5 > p1),
             {
                 "median_peak_kN": {
-                    k: _median(x) / 1e3
-                    for k, x in zip(("mu0.1", "mu0.5", "mu0.9"), (p1, p5, p9), strict=True)
+                    k: _median(x) / 1e3 for k, x in zip(("mu0.1", "mu0.5", "mu0.9"), (p1, p5, p9))
                 }
             },
         )
@@ -379,7 +380,7 @@ def plot_positions(files: dict[str, Path], path: Path, every: float = SNAPSHOT_E
     # One view for every panel: the channel from below the pusher to a little past the
     # highest block shown (the walls run much further).
     kinds = first["bodies"]["kinds"]
-    fixed = [p for k, p in zip(kinds, outlines(first, 0), strict=True) if k == "fixed"]
+    fixed = [p for k, p in zip(kinds, outlines(first, 0)) if k == "fixed"]
     left = min(p[:, 0].min() for p in fixed)
     right = max(p[:, 0].max() for p in fixed)
     # The view's top follows most of the rubble (95 % of the blocks), not a block thrown far
@@ -388,7 +389,7 @@ def plot_positions(files: dict[str, Path], path: Path, every: float = SNAPSHOT_E
     for r in runs.values():
         for t in times:
             f = int(np.argmin(np.abs(r["frames"]["time"] - t)))
-            moving = [p for k, p in zip(kinds, outlines(r, f), strict=True) if k != "fixed"]
+            moving = [p for k, p in zip(kinds, outlines(r, f)) if k != "fixed"]
             top = max(top, float(np.percentile([p[:, 1].max() for p in moving], 95)))
             bottom = min(bottom, min(p[:, 1].min() for p in moving))
     top = min(top + 0.5, max(p[:, 1].max() for p in fixed))
@@ -425,7 +426,7 @@ def plot_pillar_force(results: dict[str, EnsembleResult], path: Path) -> Path:
 
     plt = _pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(9, 5.5), squeeze=False)
-    for ax, (label, ens) in zip(axes.flat, results.items(), strict=False):
+    for ax, (label, ens) in zip(axes.flat, results.items()):
         s = ens.series[0]
         ax.plot(s["time"], probe_force_magnitude(s) / 1e3, lw=0.7, color=MODEL_COLOURS.get(label))
         ax.set_title(MODEL_TITLES.get(label, label), fontsize=10)
@@ -471,20 +472,14 @@ def plot_friction_energy(results: dict[str, EnsembleResult], path: Path) -> Path
 
 def plot_energy_budget(results: dict[str, EnsembleResult], path: Path) -> Path:
     """Every term of each single run's energy budget, with the residual on its own axis."""
+    from .budget import DISSIPATED, HELD, residual
     from .plots import _pyplot, _save
-    from .simulation import energy_residual
 
     plt = _pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), squeeze=False)
-    terms = (
-        "work_in",
-        "friction_energy",
-        "viscous_energy",
-        "drag_energy",
-        "kinetic_energy",
-        "elastic_energy",
-    )
-    for ax, (label, ens) in zip(axes.flat, results.items(), strict=False):
+    # What came in first, then where it went.
+    terms = ("work_in", *DISSIPATED, *HELD)
+    for ax, (label, ens) in zip(axes.flat, results.items()):
         s = ens.series[0]
         for name in terms:
             ax.plot(s["time"], s[name], lw=1, label=name.replace("_energy", "").replace("_", " "))
@@ -493,7 +488,7 @@ def plot_energy_budget(results: dict[str, EnsembleResult], path: Path) -> Path:
         ax.set_ylabel("energy (J)")
         ax.set_yscale("symlog", linthresh=1.0)
         twin = ax.twinx()
-        twin.plot(s["time"], energy_residual(s), "k--", lw=0.8, label="residual (right)")
+        twin.plot(s["time"], residual(s), "k--", lw=0.8, label="residual (right)")
         twin.set_ylabel("residual (J)", fontsize=8)
         twin.tick_params(labelsize=7)
         if ax is axes[0, 0]:

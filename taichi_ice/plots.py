@@ -9,9 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
+from .codes import BodyKind
 from .io import read_run
 
-KIND_COLOURS = {"dynamic": "#9ecae1", "fixed": "#7f7f7f", "kinematic": "#fdae6b"}
+KIND_COLOURS = {
+    BodyKind.DYNAMIC.label: "#9ecae1",
+    BodyKind.FIXED.label: "#7f7f7f",
+    BodyKind.KINEMATIC.label: "#fdae6b",
+}
 
 
 def _pyplot():
@@ -64,7 +69,7 @@ def plot_run(
     ``<stem>_energy.png`` (every budget term and the residual), ``<stem>_positions.png``
     (bird's-eye snapshots), and with ``animate`` ``<stem>.gif`` (blocks beside the probe force).
     """
-    from .simulation import energy_residual
+    from .budget import DISSIPATED, HELD, residual
 
     plt = _pyplot()
     path = Path(path)
@@ -88,16 +93,9 @@ def plot_run(
     written.append(_save(fig, out / f"{path.stem}_probe_force.png"))
 
     fig, ax = plt.subplots(figsize=(7, 4))
-    for name in (
-        "work_in",
-        "kinetic_energy",
-        "elastic_energy",
-        "friction_energy",
-        "viscous_energy",
-        "drag_energy",
-    ):
+    for name in ("work_in", *HELD, *DISSIPATED):
         ax.plot(t, s[name], label=name.replace("_", " "))
-    ax.plot(t, energy_residual(s), "k--", label="residual")
+    ax.plot(t, residual(s), "k--", label="residual")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("energy (J)")
     ax.set_title(title, fontsize=9)
@@ -107,7 +105,7 @@ def plot_run(
     n_frames = len(run["frames"]["time"])
     picks = np.unique(np.linspace(0, n_frames - 1, min(snapshots, n_frames)).round().astype(int))
     fig, axes = plt.subplots(1, len(picks), figsize=(2.4 * len(picks), 4), squeeze=False)
-    for ax, f in zip(axes[0], picks, strict=True):
+    for ax, f in zip(axes[0], picks):
         draw_bodies(ax, run, f)
         ax.set_title(f"t = {run['frames']['time'][f]:.1f} s", fontsize=9)
         ax.set_xticks([])
@@ -168,7 +166,7 @@ def plot_spread(results: dict, path: Path, single: bool = False, titles=None, co
     labels = list(results)
     first = 1 if single else 0
     rng = np.random.default_rng(0)  # horizontal scatter of the dots, for legibility only
-    for ax, (name, ylabel, scale, log) in zip(axes, panels, strict=True):
+    for ax, (name, ylabel, scale, log) in zip(axes, panels):
         for x, label in enumerate(labels):
             values = results[label].values(name) * scale
             d = values[first:][np.isfinite(values[first:])]

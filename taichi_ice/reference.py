@@ -4,7 +4,7 @@ The kernels (``contact.ContactStage``, ``integrate.Integrator``, ``energy.Energy
 held against this module in the tests. It writes the same algorithm one pair and one body at
 a time, in float64, from the same equations:
 
-- :func:`contact_force_np`: one pair, owner ``i`` and partner ``j``. The Hopkins (1992)
+- :func:`contact_force`: one pair, owner ``i`` and partner ``j``. The Hopkins (1992)
   overlap of the two outlines (``geometry.overlap``: area ``A``, contact point, normal from
   ``i`` into ``j``, width ``L``); the velocity of ``j`` relative to ``i`` at the contact
   point, split into the approach speed ``v_n`` and the slip ``v_t``; the normal force
@@ -14,14 +14,15 @@ a time, in float64, from the same equations:
   the stored elastic energy grows by the elastic force's work on the approach.
 - :func:`reference_step`: every owned pair of every world, forces gathered in the same
   fixed point as the kernels (``state.FORCE_QUANTUM``, truncated toward zero), then
-  semi-implicit Euler with water drag (``drag.water_drag_np``) and external forces; fixed
+  semi-implicit Euler with water drag (``drag.water_drag``) and external forces; fixed
   bodies stay, kinematic ones move at their velocity. Contact memory (``xi``, last area,
   stored elastic energy, ``theta``) is a dict keyed by the ordered pair ``(owner, partner)``
   and dropped when the pair no longer overlaps.
 - :func:`reference_energies`: the energy terms of each world, as ``World.energies``.
 
 Pairs are found by testing every pair of a world (no spatial hash), so the cost is quadratic:
-a few bodies and tens of steps.
+a few bodies and tens of steps. The model is read from the same assembled arrays the kernels
+upload (``assemble.Batch``), so a parameter is derived once for both.
 """
 
 from __future__ import annotations
@@ -33,49 +34,31 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .drag import drag_coefficients, water_drag_np
+from .assemble import Batch, assemble
+from .codes import BodyEnergy, BodyKind, EnergyTerm, ThetaMethod
+from .contact import normal_force, tangential_force
+from .drag import water_drag
 from .friction import (
-    METHOD_EXPONENTIAL,
-    Coulomb,
     RateState,
     method_code,
-    rate_state_mu_np,
-    slip_log_np,
-    theta_equilibrium_np,
-    theta_step_np,
+    rate_state_mu,
+    slip_log,
+    theta_equilibrium,
+    theta_step,
 )
-from .geometry import longest_edge, overlap
-from .state import (
-    BODY_DRAG,
-    BODY_ENERGY_COUNT,
-    BODY_FRICTION,
-    BODY_VISCOUS,
-    BODY_WORK,
-    ENERGY_COUNT,
-    ENERGY_DRAG,
-    ENERGY_ELASTIC,
-    ENERGY_FRICTION,
-    ENERGY_KINETIC,
-    ENERGY_VISCOUS,
-    ENERGY_WORK_IN,
-    FORCE_QUANTUM,
-    KIND_DYNAMIC,
-    KIND_KINEMATIC,
-    KIND_NAMES,
-)
+from .geometry import overlap
+from .state import FORCE_QUANTUM
 
 __all__ = [
     "ContactForce",
     "ContactMemory",
     "ReferenceModel",
     "ReferenceState",
-    "contact_force_np",
-    "normal_force_np",
-    "outline_np",
+    "contact_force",
+    "outline",
     "owns",
     "reference_energies",
     "reference_step",
-    "tangential_force_np",
 ]
 
 
@@ -107,7 +90,7 @@ class ContactForce(NamedTuple):
     Attributes:
         area: overlap area (m^2). point: ``(2,)`` contact point (m). normal: ``(2,)`` unit
             normal from the owner into the partner. width: contact width ``L`` (m).
-            kind: ``geometry.OVERLAP_*``.
+            kind: ``codes.OverlapKind``.
         approach: approach speed along the normal (m/s), positive when closing.
         slip: tangential velocity of the partner relative to the owner (m/s), along
             ``tangent = (-normal_y, normal_x)``.
@@ -147,34 +130,7 @@ def _spin(omega: float, r) -> np.ndarray:
     return np.array([-omega * r[1], omega * r[0]])
 
 
-def normal_force_np(area, width, approach_speed, k_e, k_v) -> tuple[float, float]:
-    """NumPy twin of ``contact.normal_force``: ``(max(k_e A + k_v L v_n, 0), k_e A)`` in N."""
-    elastic = k_e * area
-    return max(elastic + k_v * width * approach_speed, 0.0), elastic
-
-
-def tangential_force_np(xi, slip_speed, dt, k_t, c_t, cap) -> tuple[float, float, float, float]:
-    """NumPy twin of ``contact.tangential_force``: stick spring-dashpot capped at ``cap``.
-
-    Returns:
-        (force on the partner along the tangent (N), new stretch (m), frictional work (J),
-        dashpot work (J)) of the step.
-    """
-    trial = xi + slip_speed * dt
-    force = -k_t * trial - c_t * slip_speed
-    slip_work = 0.0
-    damp_work = c_t * slip_speed * slip_speed * dt
-    new_xi = trial
-    if abs(force) > cap:
-        # Slip: the force is the cap; the spring-dashpot relaxes toward it (backward Euler).
-        force = math.copysign(cap, force)
-        new_xi = (c_t * xi - force * dt) / (k_t * dt + c_t)
-        slip_work = cap * abs(trial - new_xi)
-        damp_work = c_t * (new_xi - xi) * (new_xi - xi) / dt
-    return force, new_xi, slip_work, damp_work
-
-
-def contact_force_np(
+def contact_force(
     p: np.ndarray,
     q: np.ndarray,
     pos_owner,
@@ -189,14 +145,14 @@ def contact_force_np(
     k_v: float,
     k_t: float,
     c_t: float,
-    law: Coulomb | RateState,
+    law,
     memory: ContactMemory | None = None,
     method: int | None = None,
 ) -> ContactForce | None:
-    """NumPy twin of ``ContactStage.pair``: the contact between an owner and a partner.
+    """NumPy reference of ``ContactStage.pair``: the contact between an owner and a partner.
 
     The outlines and centroids may be given in any frame, the same for all four; the
-    kernel takes the owner's centroid as the origin (``outline_np``), which keeps float32
+    kernel takes the owner's centroid as the origin (``outline``), which keeps float32
     accurate far from the world origin.
 
     Args:
@@ -208,7 +164,7 @@ def contact_force_np(
         dt: time step (s). k_e: N/m^2. k_v: Pa s. k_t: N/m. c_t: N s/m.
         law: the world's friction law.
         memory: the contact's memory from the last step, or None for a new contact.
-        method: ``friction.METHOD_*`` for theta; default the law's own method.
+        method: ``codes.ThetaMethod`` for theta; default the law's own method.
 
     Returns:
         A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
@@ -226,21 +182,21 @@ def contact_force_np(
     tangent = np.array([-normal[1], normal[0]])
     approach = -float(v_rel @ normal)
     slip = float(v_rel @ tangent)
-    f_n, f_el = normal_force_np(area, width, approach, k_e, k_v)
+    f_n, f_el = normal_force(area, width, approach, k_e, k_v)
 
     old = memory if memory is not None else ContactMemory()
     theta_new = 0.0
     if isinstance(law, RateState):
         a_, b_, mu0, v_star, t_c = law.params
         code = method_code(law.method) if method is None else method
-        x = float(slip_log_np(abs(slip), v_star))
-        theta = old.theta if memory is not None else float(theta_equilibrium_np(x, b_))
-        mu = float(rate_state_mu_np(theta, x, a_, mu0))
-        theta_new = float(theta_step_np(theta, x, x, x, dt, b_, t_c, code))
+        x = float(slip_log(abs(slip), v_star))
+        theta = old.theta if memory is not None else float(theta_equilibrium(x, b_))
+        mu = float(rate_state_mu(theta, x, a_, mu0))
+        theta_new = float(theta_step(theta, x, x, x, dt, b_, t_c, code))
     else:
         mu = float(law.mu)
 
-    f_t, xi_new, slip_work, damp_work = tangential_force_np(old.xi, slip, dt, k_t, c_t, mu * f_n)
+    f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
     force = f_n * normal + f_t * tangent
     # Elastic energy stored in the contact: the work of its elastic force on the approach.
     elastic = old.elastic + f_el * approach * dt
@@ -273,17 +229,17 @@ def contact_force_np(
 
 @dataclass(frozen=True)
 class ReferenceModel:
-    """Static data of a batch of worlds, as ``World`` assembles it (bodies world-major).
+    """Static data of a batch of worlds, read from its assembled arrays (bodies world-major).
 
     Attributes:
-        kind: ``(N,)`` ``state.KIND_*`` codes. world: ``(N,)`` world index.
+        kind: ``(N,)`` ``codes.BodyKind``. world: ``(N,)`` world index.
         mass: ``(N,)`` kg. inertia: ``(N,)`` kg m^2. vertices: N outlines ``(n, 2)``
             relative to the centroid, unrotated (m). force_ext: ``(N, 2)`` N.
         drag: ``(N, 2)`` water drag coefficients (kg/m, kg m^2), or None with no water.
-        laws: the friction law of each world.
+        laws: the friction law of each world, rebuilt from its model columns.
         k_e (N/m^2), k_v (Pa s): normal contact parameters. k_t (N/m), c_t (N s/m): ``(W,)``
             tangential spring and dashpot of each world.
-        method: ``friction.METHOD_*`` for theta (the first world's law, as in ``World``).
+        method: ``codes.ThetaMethod`` for theta (one per batch).
         quantum: force resolution of the gather (N); None sums in floating point.
     """
 
@@ -299,7 +255,7 @@ class ReferenceModel:
     k_v: float
     k_t: np.ndarray
     c_t: np.ndarray
-    method: int = METHOD_EXPONENTIAL
+    method: int = ThetaMethod.EXPONENTIAL
     quantum: float | None = FORCE_QUANTUM
 
     @property
@@ -307,60 +263,42 @@ class ReferenceModel:
         return len(self.kind)
 
     @classmethod
-    def from_scenes(cls, scenes: Sequence, quantum: float | None = FORCE_QUANTUM):
-        """The model of ``World(scenes)``: same parameters, derived the same way.
-
-        The tangential spring and dashpot of a world scale with the longest edge of its
-        dynamic bodies (``k_t = tangential_stiffness k_e L_max``), as ``World`` takes them.
-        """
-        scenes = list(scenes)
-        ice = scenes[0].ice
-        kind, world, mass, inertia, verts, force, drag = [], [], [], [], [], [], []
-        k_t, c_t = [], []
-        for w, s in enumerate(scenes):
-            longest = 0.0
-            for i, b in enumerate(s.bodies):
-                v = np.asarray(b.vertices, dtype=np.float64)
-                kind.append(KIND_NAMES[b.kind])
-                world.append(w)
-                mass.append(float(s.masses[i]))
-                inertia.append(float(s.inertias[i]))
-                verts.append(v)
-                force.append(np.asarray(b.force, dtype=np.float64))
-                if b.kind == "dynamic":
-                    longest = max(longest, longest_edge(v))
-                if s.water is not None:
-                    area = s.masses[i] / (s.ice.density * s.ice.thickness)
-                    drag.append(
-                        drag_coefficients(
-                            area,
-                            s.ice.thickness,
-                            s.ice.density,
-                            s.water.density,
-                            s.water.form_drag,
-                            s.water.skin_drag,
-                        )
-                    )
-            width = longest if longest > 0 else 1.0
-            k_t.append(s.ice.tangential_stiffness * s.ice.contact_stiffness * width)
-            c_t.append(s.ice.tangential_stiffness * s.ice.contact_viscosity * width)
-        law0 = scenes[0].friction
+    def from_batch(cls, batch: Batch, quantum: float | None = FORCE_QUANTUM):
+        """The model of the batch a ``World`` uploads: the same arrays, nothing re-derived."""
+        host, layout = batch.host, batch.layout
+        start, count = host.body_vert_start, host.body_vert_count
+        law_class = type(batch.scenes[0].friction)
+        extra = {"method": ThetaMethod(layout.theta_method).label} if layout.rate_state else {}
+        laws = tuple(
+            law_class(
+                **{p.name: float(host[f"world_{p.name}"][w]) for p in law_class.parameters()},
+                **extra,
+            )
+            for w in range(layout.n_worlds)
+        )
         return cls(
-            kind=np.array(kind, dtype=np.int32),
-            world=np.array(world, dtype=np.int32),
-            mass=np.array(mass),
-            inertia=np.array(inertia),
-            vertices=tuple(verts),
-            force_ext=np.array(force).reshape(-1, 2),
-            drag=np.array(drag).reshape(-1, 2) if scenes[0].water is not None else None,
-            laws=tuple(s.friction for s in scenes),
-            k_e=ice.contact_stiffness,
-            k_v=ice.contact_viscosity,
-            k_t=np.array(k_t),
-            c_t=np.array(c_t),
-            method=method_code(law0.method) if isinstance(law0, RateState) else 0,
+            kind=host.body_kind,
+            world=host.body_world,
+            mass=host.body_mass,
+            inertia=host.body_inertia,
+            vertices=tuple(host.vert_local[a : a + n] for a, n in zip(start, count)),
+            force_ext=host.body_force_ext,
+            drag=np.stack([host.body_drag_linear, host.body_drag_rotational], axis=1)
+            if layout.water
+            else None,
+            laws=laws,
+            k_e=layout.contact_stiffness,
+            k_v=layout.contact_viscosity,
+            k_t=host.world_k_t,
+            c_t=host.world_c_t,
+            method=layout.theta_method,
             quantum=quantum,
         )
+
+    @classmethod
+    def from_scenes(cls, scenes: Sequence, quantum: float | None = FORCE_QUANTUM):
+        """The model of ``World(scenes)`` (``assemble`` then :meth:`from_batch`)."""
+        return cls.from_batch(assemble(scenes), quantum)
 
 
 @dataclass
@@ -370,7 +308,7 @@ class ReferenceState:
     Attributes:
         pos: ``(N, 2)`` m. angle: ``(N,)`` rad. vel: ``(N, 2)`` m/s. omega: ``(N,)`` rad/s.
         contacts: ``{(owner, partner): ContactMemory}`` of the contacts of the last step.
-        body_energy: ``(N, 4)`` cumulative terms per body (J), ``state.BODY_*`` columns.
+        body_energy: ``(N, 4)`` cumulative terms per body (J), ``codes.BodyEnergy`` columns.
         time: s.
     """
 
@@ -384,18 +322,23 @@ class ReferenceState:
 
     def __post_init__(self) -> None:
         if self.body_energy is None:
-            self.body_energy = np.zeros((len(self.angle), BODY_ENERGY_COUNT))
+            self.body_energy = np.zeros((len(self.angle), len(BodyEnergy)))
+
+    @classmethod
+    def from_batch(cls, batch: Batch) -> ReferenceState:
+        """The initial state of the batch a ``World`` uploads."""
+        host = batch.host
+        return cls(
+            pos=host.body_pos.copy(),
+            angle=host.body_angle.copy(),
+            vel=host.body_vel.copy(),
+            omega=host.body_omega.copy(),
+        )
 
     @classmethod
     def from_scenes(cls, scenes: Sequence) -> ReferenceState:
         """The initial state of ``World(scenes)``."""
-        scenes = list(scenes)
-        return cls(
-            pos=np.concatenate([np.asarray(s.positions, dtype=np.float64) for s in scenes]),
-            angle=np.concatenate([np.asarray(s.angles, dtype=np.float64) for s in scenes]),
-            vel=np.concatenate([np.asarray(s.velocities, dtype=np.float64) for s in scenes]),
-            omega=np.concatenate([np.asarray(s.omegas, dtype=np.float64) for s in scenes]),
-        )
+        return cls.from_batch(assemble(scenes))
 
     def copy(self) -> ReferenceState:
         return replace(
@@ -411,11 +354,11 @@ class ReferenceState:
 
 def owns(kind: np.ndarray, i: int, j: int) -> bool:
     """True if body i handles the pair (i, j): the dynamic one, or the lower id of two."""
-    dyn_i, dyn_j = kind[i] == KIND_DYNAMIC, kind[j] == KIND_DYNAMIC
+    dyn_i, dyn_j = kind[i] == BodyKind.DYNAMIC, kind[j] == BodyKind.DYNAMIC
     return bool((dyn_i and not dyn_j) or (dyn_i and dyn_j and i < j))
 
 
-def outline_np(model: ReferenceModel, state: ReferenceState, i: int, origin=(0.0, 0.0)):
+def outline(model: ReferenceModel, state: ReferenceState, i: int, origin=(0.0, 0.0)):
     """``(n, 2)`` outline of body i relative to ``origin`` (m), as ``ContactStage.outline``.
 
     Same operations in the same order as the kernel: ``(x - origin) + R v``.
@@ -430,7 +373,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
     """One step of every world, as ``World.step`` takes it; returns the new state.
 
     Contacts: every ordered pair (owner, partner) of a world, in body order, through
-    :func:`contact_force_np`; forces and torques are gathered in fixed point of
+    :func:`contact_force`; forces and torques are gathered in fixed point of
     ``model.quantum`` (each contribution truncated toward zero, as the kernel's cast does),
     or in floating point if ``model.quantum`` is None. Then semi-implicit Euler:
     ``v += dt (F + F_ext + F_drag(v)) / m``, ``x += dt v`` (and the angle likewise).
@@ -459,9 +402,9 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 continue
             # In the owner's frame, as the kernel clips.
             origin = state.pos[i]
-            c = contact_force_np(
-                outline_np(model, state, i, origin),
-                outline_np(model, state, j, origin),
+            c = contact_force(
+                outline(model, state, i, origin),
+                outline(model, state, j, origin),
                 np.zeros(2),
                 state.vel[i],
                 state.omega[i],
@@ -481,8 +424,8 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 continue  # no overlap: the pair's memory is dropped
             gather(j, c.force, c.torque_partner)
             gather(i, -c.force, c.torque_owner)
-            new.body_energy[i, BODY_FRICTION] += c.slip_work
-            new.body_energy[i, BODY_VISCOUS] += c.viscous_work
+            new.body_energy[i, BodyEnergy.FRICTION] += c.slip_work
+            new.body_energy[i, BodyEnergy.VISCOUS] += c.viscous_work
             contacts[(i, j)] = c.memory
     new.contacts = contacts
 
@@ -492,11 +435,11 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
         else:
             f = np.array([float(force_sum[i][0]), float(force_sum[i][1])]) * model.quantum
             tau = float(torque_sum[i]) * model.quantum
-        if model.kind[i] == KIND_DYNAMIC:
+        if model.kind[i] == BodyKind.DYNAMIC:
             v0, w0 = state.vel[i], float(state.omega[i])
             f_drag, t_drag = np.zeros(2), 0.0
             if model.drag is not None:
-                fd, td = water_drag_np(
+                fd, td = water_drag(
                     v0[None, :], np.array([w0]), model.drag[i, 0:1], model.drag[i, 1:2]
                 )
                 f_drag, t_drag = fd[0], float(td[0])
@@ -504,15 +447,15 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             v1 = v0 + dt * (1.0 / model.mass[i]) * (f + f_ext + f_drag)
             w1 = w0 + dt * (1.0 / model.inertia[i]) * (tau + t_drag)
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
-            new.body_energy[i, BODY_DRAG] += -(float(f_drag @ vm) + t_drag * wm) * dt
-            new.body_energy[i, BODY_WORK] += float(f_ext @ vm) * dt
+            new.body_energy[i, BodyEnergy.DRAG] += -(float(f_drag @ vm) + t_drag * wm) * dt
+            new.body_energy[i, BodyEnergy.WORK] += float(f_ext @ vm) * dt
             new.vel[i] = v1
             new.omega[i] = w1
             new.pos[i] = state.pos[i] + dt * v1
             new.angle[i] = state.angle[i] + dt * w1
-        elif model.kind[i] == KIND_KINEMATIC:
+        elif model.kind[i] == BodyKind.KINEMATIC:
             v, w = state.vel[i], float(state.omega[i])
-            new.body_energy[i, BODY_WORK] += -(float(f @ v) + tau * w) * dt
+            new.body_energy[i, BodyEnergy.WORK] += -(float(f @ v) + tau * w) * dt
             new.pos[i] = state.pos[i] + dt * v
             new.angle[i] = state.angle[i] + dt * w
     new.time = state.time + dt
@@ -520,21 +463,21 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
 
 
 def reference_energies(state: ReferenceState, model: ReferenceModel) -> np.ndarray:
-    """``(W, ENERGY_COUNT)`` energy terms of each world (J), ``state.ENERGY_*`` columns."""
+    """``(W, E)`` energy table of each world (J), ``codes.EnergyTerm`` columns."""
     n_worlds = int(model.world.max()) + 1 if model.n_bodies else 0
-    out = np.zeros((n_worlds, ENERGY_COUNT))
+    out = np.zeros((n_worlds, len(EnergyTerm)))
     for i in range(model.n_bodies):
         w = model.world[i]
-        if model.kind[i] == KIND_DYNAMIC:
-            out[w, ENERGY_KINETIC] += 0.5 * (
+        if model.kind[i] == BodyKind.DYNAMIC:
+            out[w, EnergyTerm.KINETIC] += 0.5 * (
                 model.mass[i] * float(state.vel[i] @ state.vel[i])
                 + model.inertia[i] * state.omega[i] ** 2
             )
-        out[w, ENERGY_FRICTION] += state.body_energy[i, BODY_FRICTION]
-        out[w, ENERGY_VISCOUS] += state.body_energy[i, BODY_VISCOUS]
-        out[w, ENERGY_DRAG] += state.body_energy[i, BODY_DRAG]
-        out[w, ENERGY_WORK_IN] += state.body_energy[i, BODY_WORK]
+        out[w, EnergyTerm.FRICTION] += state.body_energy[i, BodyEnergy.FRICTION]
+        out[w, EnergyTerm.VISCOUS] += state.body_energy[i, BodyEnergy.VISCOUS]
+        out[w, EnergyTerm.DRAG] += state.body_energy[i, BodyEnergy.DRAG]
+        out[w, EnergyTerm.WORK_IN] += state.body_energy[i, BodyEnergy.WORK]
     for (i, _j), mem in state.contacts.items():
         w = model.world[i]
-        out[w, ENERGY_ELASTIC] += mem.elastic + 0.5 * model.k_t[w] * mem.xi**2
+        out[w, EnergyTerm.ELASTIC] += mem.elastic + 0.5 * model.k_t[w] * mem.xi**2
     return out

@@ -19,15 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend
+from . import backend, budget
 from .errors import DivergenceError, TaichiIceError
-from .io import SERIES_ENERGY, RunWriter
-from .state import ENERGY_COUNT
-
-# The energy budget is broken, and the run stopped as diverged, once a world holds or has
-# dissipated this fraction more energy than came in (initial kinetic + elastic, plus the work
-# of kinematic bodies). Healthy runs close their budget to well under 1 %.
-BUDGET_BREACH = 0.5
+from .io import RunWriter
 
 
 @dataclass
@@ -141,11 +135,9 @@ class Simulation:
         return self.world.omegas()[self.world.world_slices()[world]]
 
     def energies(self, world: int = 0) -> dict[str, float]:
-        """The energy budget of one world now (J), with its residual."""
-        e = self.world.energies()[world]
-        out = dict(zip(SERIES_ENERGY, (float(x) for x in e[:ENERGY_COUNT]), strict=True))
-        e0 = dict(zip(SERIES_ENERGY, self.initial_energy[world][:ENERGY_COUNT], strict=True))
-        out["residual"] = float(energy_residual(out, e0))
+        """The energy budget of one world now (J), with its residual (``budget``)."""
+        out = {k: float(v) for k, v in budget.as_series(self.world.energies()[world]).items()}
+        out["residual"] = float(budget.residual(out, budget.as_series(self.initial_energy[world])))
         return out
 
     # ----------------------------------------------------------------------------------------
@@ -180,14 +172,10 @@ class Simulation:
             "stable_dt": self.world.stable_dt,
             "wall_time": 0.0,
         }
-        # No ``out``: no files (zip(strict=True) would refuse zero paths for N scenes).
-        writers = (
-            [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes, strict=True)]
-            if paths
-            else []
-        )
+        # No ``out``: no files; otherwise _paths gave one path per scene.
+        writers = [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes)] if paths else []
         series: list[dict[str, list]] = [
-            {k: [] for k in ("time", "probe_force", "n_contacts", *SERIES_ENERGY)}
+            {k: [] for k in ("time", "probe_force", "n_contacts", *budget.SERIES)}
             for _ in self.scenes
         ]
         bar = Progress(n_total, self.dt, enabled=progress)
@@ -236,34 +224,28 @@ class Simulation:
         impulses = self.world.take_probe_impulses()
         contacts = self.world.contact_counts()
         t = self.world.time
-        for w, (s, probes) in enumerate(zip(series, self.world.probe_slices(), strict=True)):
+        for w, (s, probes) in enumerate(zip(series, self.world.probe_slices())):
             force = impulses[probes] / sample_dt if self.world.steps else impulses[probes] * 0
-            row = (t, force, int(contacts[w]), *energies[w][:ENERGY_COUNT])
-            for key, value in zip(s, row, strict=True):
+            row = (t, force, int(contacts[w]), *energies[w])
+            for key, value in zip(s, row):
                 s[key].append(value)
             if writers:
-                writers[w].add_sample(t, force, energies[w][:ENERGY_COUNT], int(contacts[w]))
+                writers[w].add_sample(t, force, energies[w], int(contacts[w]))
         self._check_budget(energies)
 
     def _check_budget(self, energies: np.ndarray) -> None:
         """Raise DivergenceError if a world holds or has dissipated far more energy than it
         was given: an explicit integration past its limit creates energy from nothing."""
-        e = energies[:, :ENERGY_COUNT].T
-        e0 = self.initial_energy[:, :ENERGY_COUNT].T
-        terms = dict(zip(SERIES_ENERGY, e, strict=True))
-        came_in = (
-            e0[SERIES_ENERGY.index("kinetic_energy")]
-            + e0[SERIES_ENERGY.index("elastic_energy")]
-            + terms["work_in"]
-        )
-        created = -energy_residual(terms, dict(zip(SERIES_ENERGY, e0, strict=True)))
-        bad = np.nonzero(created > BUDGET_BREACH * np.maximum(came_in, 0.0) + 1e-6)[0]
+        bad = budget.breached(energies, self.initial_energy)
         if bad.size:
             w = int(bad[0])
+            now = budget.as_series(energies[w])
+            start = budget.as_series(self.initial_energy[w])
             raise DivergenceError(
-                f"world {w} created {created[w]:.4g} J of energy from {came_in[w]:.4g} J in "
-                f"at t = {self.world.time:.4g} s (dt = {self.dt:.3g} s); the run diverged: "
-                "lower dt (or use dt = 'auto' without force_dt)"
+                f"world {w} created {-budget.residual(now, start):.4g} J of energy from "
+                f"{budget.came_in(now, start):.4g} J in at t = {self.world.time:.4g} s "
+                f"(dt = {self.dt:.3g} s); the run diverged: lower dt (or use dt = 'auto' "
+                "without force_dt)"
             )
 
     def _frame(self, writers) -> None:
@@ -271,42 +253,14 @@ class Simulation:
             return
         pos, ang = self.world.positions(), self.world.angles()
         vel, om = self.world.velocities(), self.world.omegas()
-        for w, sl in zip(writers, self.world.world_slices(), strict=True):
+        for w, sl in zip(writers, self.world.world_slices()):
             w.add_frame(self.world.time, pos[sl], ang[sl], vel[sl], om[sl])
-
-
-def energy_residual(e: dict, initial: dict | None = None):
-    """Energy budget residual (J): what came in minus where it is now.
-
-        residual = (kinetic + elastic)(0) + work_in - (kinetic + elastic + friction + viscous
-                   + drag)
-
-    Args:
-        e: the terms now (floats or arrays over time, as in ``/series``).
-        initial: the terms at t = 0; default the first entry of each array in ``e``.
-    """
-    if initial is None:
-        # Only the energy terms: a whole ``/series`` dict also holds probe_force, which is
-        # empty (T x 0 x 2) in a scene with no probe.
-        initial = {k: np.asarray(e[k]).reshape(-1)[0] for k in SERIES_ENERGY}
-    start = initial["kinetic_energy"] + initial["elastic_energy"]
-    return (
-        start
-        + e["work_in"]
-        - (
-            e["kinetic_energy"]
-            + e["elastic_energy"]
-            + e["friction_energy"]
-            + e["viscous_energy"]
-            + e["drag_energy"]
-        )
-    )
 
 
 def _paths(out, n_worlds: int) -> list[Path]:
     if out is None:
         return []
-    if isinstance(out, str | Path):
+    if isinstance(out, (str, Path)):
         if n_worlds != 1:
             raise ValueError(f"a batch of {n_worlds} worlds needs one output path per world")
         return [Path(out)]

@@ -1,6 +1,6 @@
 """The contact stage: forces and memory against their NumPy twin, pairs against brute force.
 
-- ``reference.contact_force_np`` (overlap from ``geometry.overlap``, itself held against
+- ``reference.contact_force`` (overlap from ``geometry.overlap``, itself held against
   shapely) against the kernel on seeded random overlapping pairs, new and remembered.
 - The spatial hash finds exactly the overlapping pairs of an all-pairs search, never across
   worlds of a batch.
@@ -16,18 +16,19 @@ import numpy as np
 import pytest
 
 from taichi_ice import CapacityError, Simulation
+from taichi_ice.codes import BodyEnergy, OverlapKind, Status
 from taichi_ice.friction import Coulomb, RateState
-from taichi_ice.geometry import OVERLAP_FALLBACK, check_polygon, overlap, sat_separated, transform
+from taichi_ice.geometry import check_polygon, overlap, sat_separated, transform
 from taichi_ice.io import read_run
 from taichi_ice.reference import (
     ReferenceModel,
     ReferenceState,
-    contact_force_np,
-    outline_np,
+    contact_force,
+    outline,
     owns,
 )
 from taichi_ice.scenario import scene_from_dict
-from taichi_ice.state import BODY_FRICTION, BODY_VISCOUS, FORCE_QUANTUM, STATUS_SLOT_OVERFLOW
+from taichi_ice.state import FORCE_QUANTUM
 from taichi_ice.world import World
 
 SEED = 20240612
@@ -171,9 +172,9 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
             a, b = 2 * w, 2 * w + 1
             i, j = (a, b) if owns(model.kind, a, b) else (b, a)
             origin = state.pos[i]
-            c = contact_force_np(
-                outline_np(model, state, i, origin),
-                outline_np(model, state, j, origin),
+            c = contact_force(
+                outline(model, state, i, origin),
+                outline(model, state, j, origin),
                 np.zeros(2),
                 state.vel[i],
                 state.omega[i],
@@ -194,7 +195,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                 continue
             expected[(i, j)] = c.memory
             seen["slip" if abs(c.tangential_force) >= c.mu * c.normal_force else "stick"] += 1
-            seen["fallback"] += c.kind == OVERLAP_FALLBACK
+            seen["fallback"] += c.kind == OverlapKind.FALLBACK
             seen["remembered"] += (i, j) in memory
             scale = np.linalg.norm(c.force)
             for k, f, tau, r in (
@@ -207,8 +208,10 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                 assert np.all(np.abs(got - f) <= tol), (step, w, got, f)
                 tol_tau = TWIN_RTOL * scale * np.linalg.norm(r) + FORCE_ATOL
                 assert abs(torque_q[k] * FORCE_QUANTUM - tau) <= tol_tau, (step, w)
-            assert energy[i, BODY_FRICTION] == pytest.approx(c.slip_work, rel=1e-8, abs=1e-12)
-            assert energy[i, BODY_VISCOUS] == pytest.approx(c.viscous_work, rel=1e-8, abs=1e-12)
+            assert energy[i, BodyEnergy.FRICTION] == pytest.approx(c.slip_work, rel=1e-8, abs=1e-12)
+            assert energy[i, BodyEnergy.VISCOUS] == pytest.approx(
+                c.viscous_work, rel=1e-8, abs=1e-12
+            )
         assert set(contacts) == set(expected)
         for key, (xi, area, elastic, theta) in contacts.items():
             want = expected[key]
@@ -284,13 +287,13 @@ def all_overlapping_pairs(outlines: list[np.ndarray], dynamic: np.ndarray) -> se
     drop pairs that cannot overlap) picks those worth clipping.
     """
     centre = np.array([o.mean(axis=0) for o in outlines])
-    radius = np.array([np.max(np.hypot(*(o - c).T)) for o, c in zip(outlines, centre, strict=True)])
+    radius = np.array([np.max(np.hypot(*(o - c).T)) for o, c in zip(outlines, centre)])
     i, j = np.triu_indices(len(outlines), k=1)
     near = np.hypot(*(centre[i] - centre[j]).T) < radius[i] + radius[j]
     near &= dynamic[i] | dynamic[j]
     return {
         frozenset((int(a), int(b)))
-        for a, b in zip(i[near], j[near], strict=True)
+        for a, b in zip(i[near], j[near])
         if overlap(outlines[a], outlines[b]).area > 0.0
     }
 
@@ -318,9 +321,9 @@ def test_spatial_hash_finds_exactly_the_overlapping_pairs(f64):
     world.data.body_angle.from_numpy(ang)
     world.hash.build()
     world.contacts.compute(world.cur)
-    assert world.data.status.to_numpy()[STATUS_SLOT_OVERFLOW] <= world.layout.slots
+    assert world.data.status.to_numpy()[Status.SLOT_OVERFLOW] <= world.layout.slots
     state = ReferenceState(pos=pos, angle=ang, vel=world.velocities(), omega=world.omegas())
-    outlines = [outline_np(model, state, i) for i in range(n)]
+    outlines = [outline(model, state, i) for i in range(n)]
     found = {frozenset(k) for k in kernel_contacts(world, 1 - world.cur)}
     for a, b in found:
         assert model.world[a] == model.world[b]
@@ -406,9 +409,9 @@ def test_theta_persists_through_a_contact_and_restarts_for_a_new_one(run_opts, t
         theta = contacts[(1, 0)][3]
         # The slip rate this step: the partner's velocity relative to the owner's at the
         # centroid of the overlap, along the chord (geometry.overlap, held to shapely).
-        c = contact_force_np(
-            outline_np(model, state, 1, state.pos[1]),
-            outline_np(model, state, 0, state.pos[1]),
+        c = contact_force(
+            outline(model, state, 1, state.pos[1]),
+            outline(model, state, 0, state.pos[1]),
             np.zeros(2),
             state.vel[1],
             state.omega[1],

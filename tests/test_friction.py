@@ -12,15 +12,14 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from taichi_ice import StabilityError, exact, friction
+from taichi_ice import StabilityError, batched, exact, friction
+from taichi_ice.batched import respond_batch, respond_batch_ti
+from taichi_ice.codes import ThetaMethod
 from taichi_ice.friction import (
     EULER_STABILITY_LIMIT,
-    METHOD_CODES,
     RK4_STABILITY_LIMIT,
     Coulomb,
     RateState,
-    respond_batch,
-    respond_batch_np,
 )
 
 # NumPy and Taichi run the same operations in the same order; only the last bits of their
@@ -79,7 +78,7 @@ def test_defaults_are_the_papers():
     assert RateState(t_c=2.0, method="rk4").params[4] == 2.0
     assert RateState(method="rk4").method == "rk4"
     assert [friction.method_code(m) for m in RateState.methods] == [0, 1, 2, 3]
-    assert friction.METHOD_RK4 == friction.method_code("rk4") == 3
+    assert ThetaMethod.RK4 == friction.method_code("rk4") == 3
 
 
 @pytest.mark.parametrize(
@@ -235,7 +234,7 @@ def test_after_slowing_below_v_star_theta_relaxes_to_zero():
     # Continuous in V at V*, at the theta the interface carries there.
     theta_at = theta[below][0]
     above, under = (
-        friction.rate_state_mu_np(theta_at, LAW.slip_log(V_STAR * f), A, MU0)
+        friction.rate_state_mu(theta_at, LAW.slip_log(V_STAR * f), A, MU0)
         for f in (1 + 1e-9, 1 - 1e-9)
     )
     assert abs(above - under) < 1e-10
@@ -280,8 +279,8 @@ def test_unstable_steps_are_refused(method, ok_h, bad_h, text):
     t_bad = np.arange(0, 20) * bad_h * T_C
     for call in (
         lambda: LAW.respond(t_bad, v, method=method),
+        lambda: respond_batch_ti(t_bad, v, LAW, method=method),
         lambda: respond_batch(t_bad, v, LAW, method=method),
-        lambda: respond_batch_np(t_bad, v, LAW, method=method),
     ):
         with pytest.raises(StabilityError, match=text) as info:
             call()
@@ -339,15 +338,15 @@ def test_bad_batches_are_refused():
     """The batch drivers refuse mismatched rows, bad parameter rows and Coulomb laws."""
     t = np.arange(5.0)
     with pytest.raises(ValueError, match=r"3 interfaces.*params has 2"):
-        respond_batch(t, np.full((3, 5), 1e-3), np.tile(LAW.params, (2, 1)))
+        respond_batch_ti(t, np.full((3, 5), 1e-3), np.tile(LAW.params, (2, 1)))
     bad = np.tile(LAW.params, (4, 1))
     bad[2, 4] = 0.0
     with pytest.raises(ValueError, match=r"params\[2, 4\] \(t_c\)"):
-        respond_batch(t, np.full(5, 1e-3), bad)
+        respond_batch_ti(t, np.full(5, 1e-3), bad)
     with pytest.raises(ValueError, match="Coulomb"):
-        respond_batch(t, np.full(5, 1e-3), Coulomb())
+        respond_batch_ti(t, np.full(5, 1e-3), Coulomb())
     with pytest.raises(ValueError, match="unknown method"):
-        respond_batch(t, np.full(5, 1e-3), method="leapfrog")
+        respond_batch_ti(t, np.full(5, 1e-3), method="leapfrog")
 
 
 def test_coulomb_is_constant():
@@ -387,8 +386,8 @@ def test_taichi_batch_matches_numpy(method, taichi_runtime):
     if taichi_runtime[1] != "f64":
         pytest.skip("the 1e-12 agreement is a float64 property")
     t, v, params = random_batch(11)
-    mu, theta = respond_batch(t, v, params, method=method, return_theta=True)
-    mu_np, theta_np = respond_batch_np(t, v, params, method=method, return_theta=True)
+    mu, theta = respond_batch_ti(t, v, params, method=method, return_theta=True)
+    mu_np, theta_np = respond_batch(t, v, params, method=method, return_theta=True)
     assert mu.shape == (48, 300) and mu.dtype == np.float64
     assert np.max(np.abs(mu - mu_np)) < AGREE_F64
     assert np.max(np.abs(theta - theta_np)) < AGREE_F64
@@ -401,21 +400,23 @@ def test_taichi_batch_matches_numpy(method, taichi_runtime):
 def test_batch_broadcasts_one_history_or_one_law(taichi_runtime):
     """A (T,) history is shared by every parameter row; a single law by every history row."""
     t, v, params = random_batch(5, n=6, samples=40)
-    shared_v = respond_batch(t, v[0], params)
+    shared_v = respond_batch_ti(t, v[0], params)
     assert shared_v.shape == (6, 40)
     for i in range(6):
         assert np.allclose(shared_v[i], RateState(*params[i]).respond(t, v[0]), atol=1e-12)
-    shared_law = respond_batch(t, v, LAW)
-    assert np.allclose(shared_law, respond_batch_np(t, v, LAW), atol=1e-12)
+    shared_law = respond_batch_ti(t, v, LAW)
+    assert np.allclose(shared_law, respond_batch(t, v, LAW), atol=1e-12)
 
 
 def test_batch_kernel_compiles_once_per_method(taichi_runtime):
     """New shapes reuse the compiled kernel (ndarray arguments); only a new method compiles."""
-    compiled = friction._respond_kernel._primal.compiled_kernels  # Taichi 1.7 internals
-    respond_batch(np.arange(4.0), np.full((2, 4), 1e-3), method="implicit")
+    compiled = batched._respond_kernel._primal.compiled_kernels  # Taichi 1.7 internals
+    respond_batch_ti(np.arange(4.0), np.full((2, 4), 1e-3), method="implicit")
     count = len(compiled)
-    respond_batch(np.arange(9.0), np.full((5, 9), 1e-3), method="implicit")
-    respond_batch(np.arange(3.0), np.full(3, 1e-3), np.tile(LAW.params, (7, 1)), method="implicit")
+    respond_batch_ti(np.arange(9.0), np.full((5, 9), 1e-3), method="implicit")
+    respond_batch_ti(
+        np.arange(3.0), np.full(3, 1e-3), np.tile(LAW.params, (7, 1)), method="implicit"
+    )
     assert len(compiled) == count
 
 
@@ -424,15 +425,15 @@ def _step_each(
     inputs: ti.types.ndarray(ndim=2), out: ti.types.ndarray(ndim=2), method: ti.template()
 ):
     for i in range(inputs.shape[0]):
-        x_start = friction.slip_log(inputs[i, 1], inputs[i, 7])
-        x_mid = friction.slip_log(inputs[i, 2], inputs[i, 7])
-        x_end = friction.slip_log(inputs[i, 3], inputs[i, 7])
-        theta = friction.theta_step(
+        x_start = friction.slip_log_ti(inputs[i, 1], inputs[i, 7])
+        x_mid = friction.slip_log_ti(inputs[i, 2], inputs[i, 7])
+        x_end = friction.slip_log_ti(inputs[i, 3], inputs[i, 7])
+        theta = friction.theta_step_ti(
             inputs[i, 0], x_start, x_mid, x_end, inputs[i, 4], inputs[i, 5], inputs[i, 6], method
         )
         out[i, 0] = theta
-        out[i, 1] = friction.rate_state_mu(theta, x_end, inputs[i, 8], inputs[i, 9])
-        out[i, 2] = friction.theta_equilibrium(x_end, inputs[i, 5])
+        out[i, 1] = friction.rate_state_mu_ti(theta, x_end, inputs[i, 8], inputs[i, 9])
+        out[i, 2] = friction.theta_equilibrium_ti(x_end, inputs[i, 5])
 
 
 @pytest.mark.parametrize("method", ALL_METHODS)
@@ -454,39 +455,40 @@ def test_taichi_functions_match_their_numpy_twins(method, taichi_runtime):
         ]
     )
     out = np.empty((n, 3))
-    _step_each(inputs, out, METHOD_CODES[method])
+    _step_each(inputs, out, friction.method_code(method))
     theta0, vs, vm, ve, dt, b, t_c, v_star, a, mu0 = inputs.T
-    xs, xm, xe = (friction.slip_log_np(v, v_star) for v in (vs, vm, ve))
-    theta = friction.theta_step_np(theta0, xs, xm, xe, dt, b, t_c, METHOD_CODES[method])
+    xs, xm, xe = (friction.slip_log(v, v_star) for v in (vs, vm, ve))
+    theta = friction.theta_step(theta0, xs, xm, xe, dt, b, t_c, friction.method_code(method))
     assert np.max(np.abs(out[:, 0] - theta)) < AGREE_F64
-    assert np.max(np.abs(out[:, 1] - friction.rate_state_mu_np(theta, xe, a, mu0))) < AGREE_F64
-    assert np.max(np.abs(out[:, 2] - friction.theta_equilibrium_np(xe, b))) < AGREE_F64
+    assert np.max(np.abs(out[:, 1] - friction.rate_state_mu(theta, xe, a, mu0))) < AGREE_F64
+    assert np.max(np.abs(out[:, 2] - friction.theta_equilibrium(xe, b))) < AGREE_F64
 
 
 F32_SCRIPT = textwrap.dedent(
     """
     import numpy as np
     from taichi_ice import backend
-    from taichi_ice.friction import RateState, respond_batch, respond_batch_np
+    from taichi_ice.batched import respond_batch, respond_batch_ti
+    from taichi_ice.friction import RateState
 
     rng = np.random.default_rng(2)
     t = np.cumsum(rng.uniform(0.01, 1.0, 200))
     v = 10 ** rng.uniform(-6.0, -2.0, (16, 200))
-    mu64 = respond_batch(t, v)  # starts Taichi itself: CPU, float64
+    mu64 = respond_batch_ti(t, v)  # starts Taichi itself: CPU, float64
     assert backend.current() == ("cpu", "f64"), backend.current()
     backend.init("cpu", "f32", reinit=True)
     for method in RateState.methods:
-        mu32 = respond_batch(t, v, method=method)
+        mu32 = respond_batch_ti(t, v, method=method)
         assert mu32.dtype == np.float32
-        ref = respond_batch_np(t, v, method=method)
+        ref = respond_batch(t, v, method=method)
         print(method, float(np.max(np.abs(mu32 - ref))))
-    print("f64", float(np.max(np.abs(mu64 - respond_batch_np(t, v)))))
+    print("f64", float(np.max(np.abs(mu64 - respond_batch(t, v)))))
     """
 )
 
 
 def test_float32_batch_in_its_own_process():
-    """Taichi started in float32 integrates to float32 accuracy; respond_batch starts Taichi
+    """Taichi started in float32 integrates to float32 accuracy; respond_batch_ti starts Taichi
     (CPU, float64) by itself when nobody has."""
     root = Path(__file__).resolve().parent.parent
     proc = subprocess.run(
@@ -503,3 +505,65 @@ def test_float32_batch_in_its_own_process():
     assert set(errors) == set(ALL_METHODS)
     for method, error in errors.items():
         assert 0.0 < float(error) < AGREE_F32, method
+
+
+# ---------------------------------------------------------------------------------------------
+# A law's identity: one declaration of its parameters, one parser, one label
+# ---------------------------------------------------------------------------------------------
+
+SOME_LAWS = [
+    Coulomb(),
+    Coulomb(0.3),
+    RateState(),
+    RateState(A=0.04, t_c=2.0, method="rk4"),
+    RateState(B=0.2, mu0=0.6, v_star=2e-5),
+]
+
+
+@pytest.mark.parametrize("law", SOME_LAWS, ids=repr)
+def test_every_written_form_reads_back_the_same_law(law):
+    """to_dict -> law_from_table and the command-line form -> parse_law give the law back."""
+    assert friction.law_from_table(law.to_dict()) == law
+    text = f"{law.name}:" + ",".join(f"{k}={v}" for k, v in law.to_dict().items() if k != "law")
+    assert friction.parse_law(text) == law
+
+
+def test_parameters_are_declared_once_with_units():
+    """Each law lists its parameters with the paper's defaults, units and meaning; the batch
+    model has one column per parameter."""
+    from taichi_ice import schema
+
+    names = {p.name: p for p in RateState.parameters()}
+    assert list(names) == ["A", "B", "mu0", "v_star", "t_c"]
+    assert names["v_star"].unit == "m/s" and names["t_c"].unit == "s" and names["t_c"].positive
+    assert [p.default for p in names.values()] == list(RateState().params)
+    for law in friction.LAWS.values():
+        for p in law.parameters():
+            assert schema.var(f"world_{p.name}").unit == p.unit
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "message"),
+    [
+        ("viscous", "law", "unknown law"),
+        ("rate-state:a=0.1", "a", "did you mean 'A'"),
+        ("rate-state:mu=0.3", "mu", 'belongs to law = "coulomb"'),
+        ("coulomb:-0.1", "mu", "mu must be >= 0"),
+        ("rate-state:t_c=abc", "t_c", "must be a number"),
+        ("rate-state:method=heun", "method", "method must be one of"),
+    ],
+)
+def test_bad_law_text_names_the_key(text, key, message):
+    """A mistake in a law's text names the key and says what is wrong."""
+    with pytest.raises(friction.LawError, match=message) as info:
+        friction.parse_law(text)
+    assert info.value.key == key
+
+
+def test_scene_tables_are_strict_where_the_command_line_is_lenient():
+    """The command line takes 'rs' and 'RATE-STATE'; a scene file must spell the name."""
+    assert friction.parse_law("RS:t_c=2") == RateState(t_c=2.0)
+    with pytest.raises(friction.LawError, match='did you mean "rate-state"'):
+        friction.law_from_table({"law": "rate_state"})
+    with pytest.raises(friction.LawError, match="remove the quotes"):
+        friction.law_from_table({"law": "coulomb", "mu": "0.3"})

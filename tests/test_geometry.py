@@ -9,11 +9,10 @@ import pytest
 import shapely
 from shapely.geometry import MultiPoint, Point, Polygon
 
+from taichi_ice.batched import overlap_batch_ti
+from taichi_ice.codes import OverlapKind
 from taichi_ice.errors import PolygonError
 from taichi_ice.geometry import (
-    OVERLAP_CHORD,
-    OVERLAP_FALLBACK,
-    OVERLAP_NONE,
     check_polygon,
     diamond,
     intersection_polygon,
@@ -21,7 +20,6 @@ from taichi_ice.geometry import (
     min_penetration_axis,
     min_width,
     overlap,
-    overlap_batch,
     rectangle,
     sat_separated,
     transform,
@@ -90,13 +88,13 @@ def reference(pairs):
 
 @pytest.fixture(scope="module")
 def batch(pairs, taichi_runtime):
-    """Taichi overlap_batch on every pair, and the inputs rounded to its precision."""
+    """Taichi overlap_batch_ti on every pair, and the inputs rounded to its precision."""
     real = np.float64 if taichi_runtime[1] == "f64" else np.float32
     p, n_p = _pad([p for p, _ in pairs])
     q, n_q = _pad([q for _, q in pairs])
     p, q = p.astype(real), q.astype(real)
     rounded = [(p[b, : n_p[b]].astype(float), q[b, : n_q[b]].astype(float)) for b in range(len(p))]
-    return overlap_batch(p, n_p, q, n_q), rounded
+    return overlap_batch_ti(p, n_p, q, n_q), rounded
 
 
 def _ti_rtol(taichi_runtime) -> float:
@@ -106,7 +104,7 @@ def _ti_rtol(taichi_runtime) -> float:
 def _assert_area_centroid(label, areas, centroids, pairs, shapes, rtol):
     """Area and first moment (area * centroid) against shapely, relative to the pair's size."""
     worst_area = worst_moment = 0.0
-    for area, centroid, (p, q), ref in zip(areas, centroids, pairs, shapes, strict=True):
+    for area, centroid, (p, q), ref in zip(areas, centroids, pairs, shapes):
         scale = min(mass_properties(p)[0], mass_properties(q)[0])
         err_area = abs(area - ref.area) / scale
         # The centroid of a sliver is ill-conditioned; its first moment is not.
@@ -136,7 +134,7 @@ def test_numpy_overlap_area_and_centroid_match_shapely(pairs, reference):
 def test_intersection_polygon_matches_shapely(pairs, reference):
     """The clipped polygon covers exactly shapely's intersection (symmetric difference ~ 0)."""
     worst = 0.0
-    for (p, q), ref in zip(pairs[:500], reference[1][:500], strict=True):
+    for (p, q), ref in zip(pairs[:500], reference[1][:500]):
         clipped = intersection_polygon(p, q)
         if len(clipped) < 3 or ref.area == 0.0:
             continue
@@ -170,15 +168,15 @@ def test_chord_endpoints_match_shapely_boundary_crossings(pairs, reference):
     """A chord contact's width and normal come from the two points where the boundaries cross."""
     ours = reference[0]
     n_chord = 0
-    for (p, q), ov in zip(pairs, ours, strict=True):
+    for (p, q), ov in zip(pairs, ours):
         if ov.area == 0.0:
             continue
         ref = _shapely_crossings(p, q)
         assert ref is not None  # random pairs share no edge segment
         if len(ref) != 2:
-            assert ov.kind == OVERLAP_FALLBACK
+            assert ov.kind == OverlapKind.FALLBACK
             continue
-        assert ov.kind == OVERLAP_CHORD
+        assert ov.kind == OverlapKind.CHORD
         n_chord += 1
         size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
         chord = ref[1] - ref[0]
@@ -198,7 +196,7 @@ def test_chord_endpoints_match_shapely_boundary_crossings(pairs, reference):
 
 def test_sat_agrees_with_shapely_on_random_pairs(pairs, reference):
     """SAT separates a pair exactly when shapely's intersection has no area (off exact touching)."""
-    for (p, q), shape in zip(pairs, reference[1], strict=True):
+    for (p, q), shape in zip(pairs, reference[1]):
         depth, axis = min_penetration_axis(p, q)
         size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
         if abs(depth) < TOUCH_RTOL * size:
@@ -233,13 +231,13 @@ def test_taichi_matches_numpy_on_random_pairs(batch, taichi_runtime):
             # flip, and only in float32.
             n_kind_differs += 1
             continue
-        if ov.kind == OVERLAP_NONE:
+        if ov.kind == OverlapKind.NONE:
             continue
         worst["area"] = max(worst["area"], abs(result.area[b] - ov.area) / size**2)
         worst["centroid"] = max(
             worst["centroid"], np.max(np.abs(result.centroid[b] - ov.centroid)) * ov.area / size**3
         )
-        if ov.kind == OVERLAP_CHORD:
+        if ov.kind == OverlapKind.CHORD:
             # The normal of a short chord turns by (endpoint error / width): compare the
             # endpoint displacement this implies.
             turn = np.max(np.abs(result.normal[b] - ov.normal)) * ov.width / size
@@ -264,7 +262,7 @@ HAND_CASES = {
         [0.3, 1.95],
         [0.0, 1.0],
         1.0,
-        OVERLAP_CHORD,
+        OverlapKind.CHORD,
     ),
     "diamond corner into a face": (
         rectangle(4.0, 4.0),
@@ -274,7 +272,7 @@ HAND_CASES = {
         [-0.5, 2.0 - 0.1 / 3.0],
         [0.0, 1.0],
         0.2,
-        OVERLAP_CHORD,
+        OverlapKind.CHORD,
     ),
     "containment": (
         rectangle(4.0, 4.0),
@@ -284,7 +282,7 @@ HAND_CASES = {
         [1.0, 0.2],
         [1.0, 0.0],
         0.5,
-        OVERLAP_FALLBACK,
+        OverlapKind.FALLBACK,
     ),
     "touching edges": (
         rectangle(2.0, 2.0),
@@ -293,7 +291,7 @@ HAND_CASES = {
         [0.0, 0.0],
         [0.0, 0.0],
         0.0,
-        OVERLAP_NONE,
+        OverlapKind.NONE,
     ),
     "collinear faces, overlapping": (
         rectangle(2.0, 2.0),
@@ -303,7 +301,7 @@ HAND_CASES = {
         [0.95, 0.0],
         [1.0, 0.0],
         2.0,
-        OVERLAP_FALLBACK,
+        OverlapKind.FALLBACK,
     ),
     "eight crossings": (
         rectangle(2.0, 2.0),
@@ -314,7 +312,7 @@ HAND_CASES = {
         [0.0, 0.0],
         [0.0, -1.0],
         2.0,
-        OVERLAP_FALLBACK,
+        OverlapKind.FALLBACK,
     ),
     "identical": (
         diamond(2.0, 1.0),
@@ -325,7 +323,7 @@ HAND_CASES = {
         [1.0 / np.sqrt(1.25) * 0.5, 1.0 / np.sqrt(1.25)],
         # Extent of the diamond across that normal, between the x corners: 2 / sqrt(1.25).
         2.0 / np.sqrt(1.25),
-        OVERLAP_FALLBACK,
+        OverlapKind.FALLBACK,
     ),
 }
 
@@ -344,7 +342,7 @@ def test_overlap_hand_cases(name, taichi_runtime):
     tol = 1e-12 if taichi_runtime[1] == "f64" else 1e-5
     pp, n_p = _pad([p])
     qq, n_q = _pad([q])
-    ti_ov = overlap_batch(pp, n_p, qq, n_q)
+    ti_ov = overlap_batch_ti(pp, n_p, qq, n_q)
     assert ti_ov.kind[0] == kind
     assert ti_ov.area[0] == pytest.approx(area, abs=tol)
     np.testing.assert_allclose(ti_ov.centroid[0], centroid, atol=tol)
@@ -358,7 +356,7 @@ def test_face_on_width_and_area_follow_the_depth():
     for depth in (1e-6, 1e-3, 0.05, 0.3):
         q = transform(rectangle(side, side), [0.2, 2.0 + 0.5 * side - depth], 0.0)
         ov = overlap(rectangle(4.0, 4.0), q)
-        assert ov.kind == OVERLAP_CHORD
+        assert ov.kind == OverlapKind.CHORD
         assert ov.area == pytest.approx(side * depth, rel=1e-9)
         assert ov.width == pytest.approx(side, rel=1e-12)
         np.testing.assert_allclose(ov.normal, [0.0, 1.0], atol=1e-12)
@@ -369,10 +367,10 @@ def test_chord_tends_to_the_fallback_at_collinear_faces():
     side, depth = 2.0, 0.01
     p = rectangle(side, side)
     collinear = overlap(p, transform(p, [side - depth, 0.0], 0.0))
-    assert collinear.kind == OVERLAP_FALLBACK
+    assert collinear.kind == OverlapKind.FALLBACK
     for shift in (1e-3, 1e-6, 1e-9):
         near = overlap(p, transform(p, [side - depth, shift], 0.0))
-        assert near.kind == OVERLAP_CHORD
+        assert near.kind == OverlapKind.CHORD
         assert near.area == pytest.approx(collinear.area, abs=depth * shift * 1.01)
         assert np.max(np.abs(near.normal - collinear.normal)) < 1.01 * depth / side
         # The overlap itself is shorter by the shift; the chord adds (d / w)^2 / 2.
@@ -381,13 +379,13 @@ def test_chord_tends_to_the_fallback_at_collinear_faces():
 
 def test_overlap_is_antisymmetric_in_its_arguments(pairs, reference):
     """overlap(q, p) has the same area, centroid and width as overlap(p, q), opposite normal."""
-    for (p, q), ov in zip(pairs[:1000], reference[0][:1000], strict=True):
+    for (p, q), ov in zip(pairs[:1000], reference[0][:1000]):
         vo = overlap(q, p)
         size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
         assert vo.kind == ov.kind
         assert vo.area == pytest.approx(ov.area, abs=SHAPELY_RTOL * size**2)
         assert ov.area * np.max(np.abs(vo.centroid - ov.centroid)) < SHAPELY_RTOL * size**3
-        if ov.kind == OVERLAP_CHORD:
+        if ov.kind == OverlapKind.CHORD:
             assert vo.width == pytest.approx(ov.width, abs=SHAPELY_RTOL * size)
             np.testing.assert_allclose(vo.normal, -ov.normal, atol=SHAPELY_RTOL)
 
@@ -395,7 +393,7 @@ def test_overlap_is_antisymmetric_in_its_arguments(pairs, reference):
 def test_overlap_follows_a_rigid_motion_of_both_polygons(pairs, reference):
     """Rotating and translating both polygons rotates and translates the contact, nothing else."""
     rng = np.random.default_rng(SEED + 1)
-    for (p, q), ov in zip(pairs[:1000], reference[0][:1000], strict=True):
+    for (p, q), ov in zip(pairs[:1000], reference[0][:1000]):
         angle, shift = rng.uniform(0.0, 2.0 * np.pi), rng.uniform(-20.0, 20.0, 2)
         rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
         moved = overlap(transform(p, shift, angle), transform(q, shift, angle))
@@ -404,12 +402,12 @@ def test_overlap_follows_a_rigid_motion_of_both_polygons(pairs, reference):
         tol = 100 * SHAPELY_RTOL
         assert moved.kind == ov.kind
         assert moved.area == pytest.approx(ov.area, abs=tol * size**2)
-        if ov.kind == OVERLAP_NONE:
+        if ov.kind == OverlapKind.NONE:
             continue
         assert (
             ov.area * np.max(np.abs(moved.centroid - (rot @ ov.centroid + shift))) < tol * size**3
         )
-        if ov.kind == OVERLAP_CHORD:
+        if ov.kind == OverlapKind.CHORD:
             assert moved.width == pytest.approx(ov.width, abs=tol * size)
             np.testing.assert_allclose(moved.normal, rot @ ov.normal, atol=tol)
 

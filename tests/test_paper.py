@@ -17,11 +17,12 @@ import numpy as np
 import pytest
 
 from taichi_ice import Simulation, load_scenario
+from taichi_ice.budget import SERIES as SERIES_ENERGY
+from taichi_ice.budget import residual as energy_residual
 from taichi_ice.cli import main
-from taichi_ice.ensemble import concentration, law_label, run_ensemble, run_metrics
+from taichi_ice.ensemble import concentration, run_ensemble, run_metrics
 from taichi_ice.friction import Coulomb, RateState
-from taichi_ice.io import SERIES_ENERGY, read_run
-from taichi_ice.simulation import energy_residual
+from taichi_ice.io import read_run
 
 ROOT = Path(__file__).resolve().parents[1]
 PILLAR = ROOT / "scenarios" / "pillar.toml"
@@ -90,11 +91,11 @@ def test_run_metrics_of_a_synthetic_series():
 
 
 def test_law_labels():
-    assert law_label(Coulomb(0.5)) == "mu0.5"
-    assert law_label(Coulomb(0.1)) == "mu0.1"
-    assert law_label(RateState()) == "rate-state"
-    assert law_label(RateState(method="rk4")) == "rate-state"
-    assert law_label(RateState(t_c=5.0)) == "rate-state_t_c5"
+    assert Coulomb(0.5).label == "mu0.5"
+    assert Coulomb(0.1).label == "mu0.1"
+    assert RateState().label == "rate-state"
+    assert RateState(method="rk4").label == "rate-state"
+    assert RateState(t_c=5.0).label == "rate-state_t_c5"
 
 
 # --------------------------------------------------------------------------------------------

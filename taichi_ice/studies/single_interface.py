@@ -273,7 +273,7 @@ def plot_figure3(
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), constrained_layout=True)
-    for ax, (name, (t, v, mu, mu_exact)) in zip(axes.flat, curves.items(), strict=True):
+    for ax, (name, (t, v, mu, mu_exact)) in zip(axes.flat, curves.items()):
         profile = profile_set[name]
         shown = t <= profile.shown + 1e-9
         every = max(1, int(shown.sum()) // 40)

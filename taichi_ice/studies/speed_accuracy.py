@@ -11,8 +11,8 @@ down to ~1e-3 t_c:
   between samples, as a DEM provides it. The interpolation error of the half-step slip
   rate is O(dt^2), so RK4 drops to order 2 and the exponential method keeps 2.
 
-Speed: nanoseconds per interface-step of the batched drivers (``respond_batch`` in
-Taichi, ``respond_batch_np`` in NumPy) on 1e6 interfaces with their own random slip-rate
+Speed: nanoseconds per interface-step of the batched drivers (``respond_batch_ti`` in
+Taichi, ``respond_batch`` in NumPy) on 1e6 interfaces with their own random slip-rate
 histories. Error against wall time puts the two together: the cost of one history at step
 dt is (steps) x (ns per interface-step).
 
@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from ..friction import METHOD_CODES, METHODS, RateState
+from ..friction import METHODS, RateState, method_code
 from .single_interface import Profile, profiles
 
 # Halvings of the step: ramp dt = 1 s ... 2^-10 s; sinusoid dt = P/4 ... P/4096.
@@ -99,10 +99,10 @@ def _best_time(fn, repeats: int) -> float:
 def worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[str, Any]:
     """Errors and timings for one precision; starts Taichi in that precision."""
     from .. import backend
-    from ..friction import (
+    from ..batched import (
         respond_batch,
-        respond_batch_np,
-        respond_batch_np_unchecked,
+        respond_batch_ti,
+        respond_batch_ti_unchecked,
         respond_batch_unchecked,
     )
 
@@ -118,9 +118,9 @@ def worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[st
                     t, v = profile.grid(dt)
                     mu_exact = profile.exact(t, law)
                     if impl == "taichi":
-                        mu = respond_batch(t, v, law, method=method)[0]
+                        mu = respond_batch_ti(t, v, law, method=method)[0]
                     else:
-                        mu = respond_batch_np(t, v, law, method=method, dtype=dtype)[0]
+                        mu = respond_batch(t, v, law, method=method, dtype=dtype)[0]
                     errors.append(float(np.max(np.abs(mu.astype(np.float64) - mu_exact))))
                     steps.append(int(t.size - 1))
                 runs.append(
@@ -153,10 +153,10 @@ def worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[st
     interface_steps = n_interfaces * (BENCH_SAMPLES - 1)
     timings = []
     for method in METHODS:
-        code = METHOD_CODES[method]
-        respond_batch_unchecked(t, v[:2], params, code, mu_out[:2])  # compile, untimed
-        taichi_s = _best_time(lambda c=code: respond_batch_unchecked(t, v, params, c, mu_out), 3)
-        numpy_s = _best_time(lambda c=code: respond_batch_np_unchecked(t, v, params, c, dtype), 2)
+        code = method_code(method)
+        respond_batch_ti_unchecked(t, v[:2], params, code, mu_out[:2])  # compile, untimed
+        taichi_s = _best_time(lambda c=code: respond_batch_ti_unchecked(t, v, params, c, mu_out), 3)
+        numpy_s = _best_time(lambda c=code: respond_batch_unchecked(t, v, params, c, dtype), 2)
         for impl, seconds in (("taichi", taichi_s), ("numpy", numpy_s)):
             timings.append(
                 {

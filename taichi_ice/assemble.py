@@ -1,0 +1,327 @@
+"""Scenes to the NumPy arrays of one batch: what every world needs, checked, in one place.
+
+``assemble(scenes, ...)`` concatenates the bodies of every scene world by world and derives
+the per-body and per-world parameters (masses, drag coefficients, the tangential spring, the
+friction law's columns), the sizes and compile-time switches of the batch (``Layout``) and
+its time step. ``World`` uploads the result to Taichi fields; the NumPy reference
+(``reference.ReferenceModel``) reads the same arrays, so the two never derive a parameter
+twice.
+
+NumPy only: no Taichi field, kernel or runtime (the geometry and drag modules it reads define
+their Taichi twins beside their NumPy functions, so importing them imports Taichi, ~0.2 s,
+but nothing starts it).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import geometry
+from .codes import BodyKind, ThetaMethod
+from .drag import drag_coefficients
+from .errors import ScenarioError, StabilityError
+from .schema import SCAN, HostArrays, Layout
+
+# Contact slots per body beyond the large bodies of its world. A convex block in a dense
+# packing touches at most about eight others and owns at most all of them.
+DEFAULT_SMALL_SLOTS = 10
+
+# A dynamic body that moves more than this fraction of its thinnest dimension in one step
+# has left the regime where contacts can be resolved (it would pass a quarter of the way
+# through a neighbour before the contact is seen): the integration has blown up. This is a
+# numerical bound, not a physical one: a jam that stores a megajoule and releases it can
+# throw a block at tens of m/s, and that is the model's answer, not a divergence. (Energy
+# created from nothing is caught by the energy budget, ``budget.breached``.)
+RUNAWAY_STEP_FRACTION = 0.25
+
+# Largest polygon the contact kernel compiles for (its clip buffers are 2 MAXV long).
+MAX_VERTS_LIMIT = 16
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Everything a batch of worlds needs before its fields exist.
+
+    Attributes:
+        scenes: the worlds, in order.
+        layout: sizes and compile-time switches (``schema.Layout``).
+        host: the arrays of every ``HOST`` field (``schema.HostArrays``).
+        dt: the time step (s). stable_dt: the contact stability limit (s), over every world.
+    """
+
+    scenes: tuple
+    layout: Layout
+    host: HostArrays
+    dt: float
+    stable_dt: float
+
+    def world_slices(self) -> list[slice]:
+        """Body index range of each world."""
+        s = self.host.world_body_start
+        return [slice(int(s[w]), int(s[w + 1])) for w in range(len(self.scenes))]
+
+    def probe_slices(self) -> list[slice]:
+        """Probe index range of each world."""
+        counts = [len(sc.probe_indices) for sc in self.scenes]
+        start = np.concatenate([[0], np.cumsum(counts)]).astype(int)
+        return [slice(int(start[w]), int(start[w + 1])) for w in range(len(self.scenes))]
+
+
+def assemble(
+    scenes: Sequence,
+    dt: float | None = None,
+    precision: str = "f64",
+    slots: int | None = None,
+    force_dt: bool = False,
+) -> Batch:
+    """Check that ``scenes`` can run as one batch and build its arrays.
+
+    Args:
+        scenes: the worlds. They must share the ice properties, the water table (present or
+            not), the kind of friction law and, for rate-and-state, its integrator; the law's
+            parameters and everything else may differ.
+        dt: time step (s); default the smallest ``scene.dt``.
+        precision: 'f64' or 'f32'.
+        slots: contact slots per body; default ``DEFAULT_SMALL_SLOTS`` plus the most large
+            bodies of any world.
+        force_dt: accept a dt above the stability limit.
+
+    Raises:
+        ValueError: no scenes, or worlds that disagree on what a batch shares (the message
+            names the first world that differs and what differs).
+        ScenarioError: a polygon with more vertices than the kernels hold.
+        StabilityError: a dt above the stability limit without ``force_dt``.
+    """
+    scenes = tuple(scenes)
+    if not scenes:
+        raise ValueError("a batch needs at least one scene")
+    _check_shared(scenes)
+    stable_dt = min(s.stable_dt for s in scenes)
+    dt = float(dt) if dt is not None else min(s.dt for s in scenes)
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"dt must be a positive number of seconds, got {dt}")
+    forced = force_dt or all(s.simulation.force_dt for s in scenes)
+    if dt > stable_dt and not forced:
+        raise StabilityError(
+            f"dt = {dt:.3g} s is above the contact stability limit {stable_dt:.3g} s of this "
+            f"scene; use dt = 'auto' ({scenes[0].simulation.dt_safety} x the limit) or force "
+            "it (force_dt)"
+        )
+
+    arrays, sizes = _bodies(scenes)
+    arrays.update(_worlds(scenes))
+    first = scenes[0]
+    law = first.friction
+    rate_state = law.name == "rate-state"
+    large_per_world = sizes.pop("large_per_world")
+    layout = Layout(
+        **sizes,
+        slots=int(slots) if slots else DEFAULT_SMALL_SLOTS + int(large_per_world),
+        hash_size=hash_size_for(sizes["n_small"]),
+        coulomb=law.name == "coulomb",
+        rate_state=rate_state,
+        water=first.water is not None,
+        theta_method=int(ThetaMethod.from_label(law.method))
+        if rate_state
+        else int(ThetaMethod.EXPONENTIAL),
+        contact_stiffness=first.ice.contact_stiffness,
+        contact_viscosity=first.ice.contact_viscosity,
+        runaway_speed=_runaway_speed(scenes, dt),
+        precision=precision,
+    )
+    if not layout.water:
+        arrays.pop("body_drag_linear")
+        arrays.pop("body_drag_rotational")
+    return Batch(scenes, layout, HostArrays(layout, arrays), dt, stable_dt)
+
+
+def hash_size_for(n_small: int) -> int:
+    """Buckets of the spatial hash: the smallest power of two >= 2 n_small (at least SCAN),
+    a load factor below one half."""
+    return max(SCAN, 1 << int(np.ceil(np.log2(max(2 * n_small, 2)))))
+
+
+def _check_shared(scenes: tuple) -> None:
+    """Every world agrees with the first on what one set of kernels compiles in."""
+    first = scenes[0]
+    for w, s in enumerate(scenes[1:], start=1):
+        where = f"world {w} ({s.source}) differs from world 0 ({first.source}) in"
+        if s.ice != first.ice:
+            raise ValueError(f"{where} the [ice] table; all worlds of a batch share it")
+        if s.water != first.water:
+            raise ValueError(f"{where} the [water] table; all worlds of a batch share it")
+        if s.friction.name != first.friction.name:
+            raise ValueError(
+                f"{where} the kind of friction law ({s.friction.name} against "
+                f"{first.friction.name}); a batch runs one kind (its parameters may differ)"
+            )
+        if getattr(s.friction, "method", None) != getattr(first.friction, "method", None):
+            raise ValueError(
+                f"{where} the rate-and-state integrator ({s.friction.method} against "
+                f"{first.friction.method}); the kernels compile one"
+            )
+
+
+def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
+    """Per-body arrays of every world, world-major, and the batch's sizes."""
+    rows: dict[str, list] = {
+        k: []
+        for k in (
+            "body_world",
+            "body_kind",
+            "body_mass",
+            "body_inertia",
+            "body_radius",
+            "body_vert_count",
+            "body_force_ext",
+            "body_drag_linear",
+            "body_drag_rotational",
+            "body_probe",
+            "body_pos",
+            "body_angle",
+            "body_vel",
+            "body_omega",
+        )
+    }
+    verts: list[np.ndarray] = []
+    n_probe = 0
+    for w, s in enumerate(scenes):
+        masses, inertias = s.masses, s.inertias
+        for i, b in enumerate(s.bodies):
+            v = np.asarray(b.vertices, dtype=np.float64)
+            if len(v) > MAX_VERTS_LIMIT:
+                raise ScenarioError(
+                    f"{s.source}: body '{b.name}' has {len(v)} vertices; the contact kernels "
+                    f"hold at most {MAX_VERTS_LIMIT}: simplify its outline"
+                )
+            rows["body_world"].append(w)
+            rows["body_kind"].append(BodyKind.from_label(b.kind))
+            rows["body_mass"].append(masses[i])
+            rows["body_inertia"].append(inertias[i])
+            rows["body_radius"].append(float(np.max(np.hypot(v[:, 0], v[:, 1]))))
+            rows["body_vert_count"].append(len(v))
+            rows["body_force_ext"].append(b.force)
+            c_lin, c_rot = (0.0, 0.0)
+            if s.water is not None:
+                area = masses[i] / (s.ice.density * s.ice.thickness)
+                c_lin, c_rot = drag_coefficients(
+                    area,
+                    s.ice.thickness,
+                    s.ice.density,
+                    s.water.density,
+                    s.water.form_drag,
+                    s.water.skin_drag,
+                )
+            rows["body_drag_linear"].append(c_lin)
+            rows["body_drag_rotational"].append(c_rot)
+            rows["body_probe"].append(n_probe if b.probe else -1)
+            n_probe += int(b.probe)
+            rows["body_pos"].append(b.position)
+            rows["body_angle"].append(b.angle)
+            rows["body_vel"].append(b.velocity)
+            rows["body_omega"].append(b.omega)
+            verts.append(v)
+
+    n = len(rows["body_kind"])
+    out = {
+        k: np.array(v, dtype=np.float64).reshape(n, 2)
+        if k in ("body_force_ext", "body_pos", "body_vel")
+        else np.array(v)
+        for k, v in rows.items()
+    }
+    kind = out["body_kind"] = out["body_kind"].astype(np.int32)
+    world = out["body_world"] = out["body_world"].astype(np.int32)
+    count = out["body_vert_count"] = out["body_vert_count"].astype(np.int32)
+    out["body_probe"] = out["body_probe"].astype(np.int32)
+    dynamic = kind == BodyKind.DYNAMIC
+    safe_mass = np.where(dynamic, out["body_mass"], 1.0)
+    safe_inertia = np.where(dynamic, out["body_inertia"], 1.0)
+    out["body_inv_mass"] = np.where(dynamic, 1.0 / safe_mass, 0.0)
+    out["body_inv_inertia"] = np.where(dynamic, 1.0 / safe_inertia, 0.0)
+
+    # Small bodies go into the spatial hash; larger ones (walls, pushers) are checked against
+    # every body of their world.
+    radius = out["body_radius"]
+    r_small = radius[dynamic].max() if dynamic.any() else radius.max(initial=1.0)
+    small = radius <= r_small * (1.0 + 1e-9)
+    out["body_small"] = small.astype(np.int32)
+    large_ids = np.flatnonzero(~small).astype(np.int32)
+    n_worlds = len(scenes)
+    out["large_ids"] = large_ids
+    out["world_large_start"] = np.searchsorted(world[large_ids], np.arange(n_worlds + 1)).astype(
+        np.int32
+    )
+    out["world_body_start"] = np.searchsorted(world, np.arange(n_worlds + 1)).astype(np.int32)
+    out["body_vert_start"] = (
+        np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int32) if n else count
+    )
+    out["vert_local"] = np.concatenate(verts) if verts else np.zeros((0, 2))
+    sizes = {
+        "n_bodies": n,
+        "n_verts": int(count.sum()),
+        "n_worlds": n_worlds,
+        "n_probes": n_probe,
+        "n_large": len(large_ids),
+        "max_verts": int(count.max(initial=3)),
+        "n_small": int(small.sum()),
+        # A hash cell is the diameter of the largest small body: two small bodies can only
+        # touch if their cells are neighbours.
+        "cell_size": 2.0 * float(r_small),
+        "large_per_world": int(np.diff(out["world_large_start"]).max(initial=0)),
+    }
+    return out, sizes
+
+
+def _worlds(scenes: tuple) -> dict[str, np.ndarray]:
+    """Per-world arrays: the friction law's columns and the tangential spring-dashpot."""
+    law_class = type(scenes[0].friction)
+    out = {
+        f"world_{p.name}": np.array([getattr(s.friction, p.name) for s in scenes], dtype=float)
+        for p in law_class.parameters()
+    }
+    k_t, c_t = [], []
+    for s in scenes:
+        width = characteristic_width(s)
+        ratio = s.ice.tangential_stiffness
+        k_t.append(ratio * s.ice.contact_stiffness * width)
+        c_t.append(ratio * s.ice.contact_viscosity * width)
+    out["world_k_t"] = np.array(k_t)
+    out["world_c_t"] = np.array(c_t)
+    return out
+
+
+def characteristic_width(scene) -> float:
+    """Longest edge of any dynamic body of a scene (m): the widest contact, which sets the
+    tangential stiffness. Per world, so that a world runs the same alone or in a batch."""
+    width = 0.0
+    for b in scene.bodies:
+        if b.kind == BodyKind.DYNAMIC.label:
+            width = max(width, geometry.longest_edge(b.vertices))
+    return width if width > 0 else 1.0
+
+
+def _runaway_speed(scenes: tuple, dt: float) -> float:
+    """m/s: RUNAWAY_STEP_FRACTION of the thinnest dynamic body's width per step."""
+    thinnest = math.inf
+    for s in scenes:
+        for b in s.bodies:
+            if b.kind == BodyKind.DYNAMIC.label:
+                thinnest = min(thinnest, geometry.min_width(b.vertices))
+    if not math.isfinite(thinnest):
+        return math.inf
+    return RUNAWAY_STEP_FRACTION * thinnest / dt
+
+
+__all__ = [
+    "DEFAULT_SMALL_SLOTS",
+    "MAX_VERTS_LIMIT",
+    "RUNAWAY_STEP_FRACTION",
+    "Batch",
+    "assemble",
+    "characteristic_width",
+    "hash_size_for",
+]

@@ -1,0 +1,119 @@
+"""The energy budget of a world: its terms, the energy that came in, and the residual.
+
+    came_in  = (kinetic + elastic)(0) + work_in
+    residual = came_in - (kinetic + elastic + friction + viscous + drag)
+
+``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
+of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water;
+``kinetic`` and ``elastic`` are what the world holds now (the overlaps and the tangential
+springs). The residual is the time discretisation error of the explicit step: it shrinks
+with dt, and a large negative one (energy created) means the integration broke down.
+
+The terms are ``codes.EnergyTerm`` columns in the kernels' energy table and named series
+(``SERIES``) in run files and results. Plain NumPy: the engine, the plots, the ensemble
+metrics and the paper's figures all use this module.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .codes import EnergyTerm
+
+# Series name of each term, in EnergyTerm order (the /series datasets of a run file).
+SERIES: tuple[str, ...] = tuple(
+    "work_in" if t == EnergyTerm.WORK_IN else f"{t.label}_energy" for t in EnergyTerm
+)
+# The terms that hold energy now and the ones that accumulate its losses.
+HELD = ("kinetic_energy", "elastic_energy")
+DISSIPATED = ("friction_energy", "viscous_energy", "drag_energy")
+
+# The run is stopped as diverged once a world holds or has dissipated this fraction more
+# energy than came in: an explicit step past its stability limit creates energy from nothing,
+# while healthy runs close their budget to well under 1 %.
+BREACH = 0.5
+# Energy (J) below which a budget is not judged: round-off of an idle world.
+BREACH_FLOOR = 1e-6
+
+
+def series_name(term: EnergyTerm) -> str:
+    """The series name of a term (``friction_energy``, ``work_in``)."""
+    return SERIES[term]
+
+
+def as_series(table: np.ndarray) -> dict[str, np.ndarray]:
+    """``{series name: column}`` of an energy table whose last axis is the EnergyTerm
+    columns (one world's row ``(E,)``, a world's history ``(T, E)``, ...)."""
+    table = np.asarray(table)
+    return {name: table[..., t] for t, name in enumerate(SERIES)}
+
+
+def _initial(terms: Mapping[str, Any]) -> dict[str, Any]:
+    # The first sample of each series: a run's budget starts at t = 0.
+    return {k: np.asarray(terms[k]).reshape(-1)[0] for k in SERIES}
+
+
+def came_in(terms: Mapping[str, Any], initial: Mapping[str, Any] | None = None):
+    """Energy that came into a world (J): what it held at t = 0 plus the work done on it.
+
+    Args:
+        terms: the terms now (floats, or arrays over time as in ``/series``).
+        initial: the terms at t = 0; default the first entry of each array in ``terms``.
+    """
+    initial = _initial(terms) if initial is None else initial
+    return initial["kinetic_energy"] + initial["elastic_energy"] + np.asarray(terms["work_in"])
+
+
+def residual(terms: Mapping[str, Any], initial: Mapping[str, Any] | None = None):
+    """Budget residual (J): what came in minus what is held and what was dissipated.
+
+    Args and default as :func:`came_in`. Positive when energy went missing, negative when
+    the step created it.
+    """
+    initial = _initial(terms) if initial is None else initial
+    out = came_in(terms, initial)
+    for name in HELD + DISSIPATED:
+        out = out - np.asarray(terms[name])
+    return out
+
+
+def relative_residual(terms: Mapping[str, Any], initial: Mapping[str, Any] | None = None):
+    """Residual over the energy that came in (NaN where nothing came in)."""
+    came = np.asarray(came_in(terms, initial), dtype=float)
+    res = np.asarray(residual(terms, initial), dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(came > 0, res / np.where(came > 0, came, 1.0), np.nan)
+
+
+def breached(table: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """Indices of the worlds whose budget shows energy created from nothing.
+
+    Args:
+        table: ``(W, E)`` energy table of every world now (EnergyTerm columns).
+        initial: ``(W, E)`` the same at t = 0.
+
+    Returns:
+        The worlds where the energy created (minus the residual) exceeds ``BREACH`` times
+        what came in, plus ``BREACH_FLOOR``.
+    """
+    now, start = as_series(table), as_series(initial)
+    created = -residual(now, start)
+    came = came_in(now, start)
+    return np.nonzero(created > BREACH * np.maximum(came, 0.0) + BREACH_FLOOR)[0]
+
+
+__all__ = [
+    "BREACH",
+    "DISSIPATED",
+    "HELD",
+    "SERIES",
+    "as_series",
+    "breached",
+    "came_in",
+    "relative_residual",
+    "residual",
+    "series_name",
+]

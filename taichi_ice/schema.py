@@ -1,0 +1,570 @@
+"""The state of a batch of worlds, declared once: every field's name, type, shape and unit.
+
+Everything else is derived from the tables below: the Taichi fields of ``state.Model``,
+``state.Data`` and the broad phase's scratch (``state.allocate``), the NumPy arrays that
+``assemble`` builds and ``state.upload`` copies in (``HOST``), the field table in
+``docs/state.md`` (``markdown_table``), and the benchmark's traffic model (``traffic``),
+which charges each stage for the fields it declares it reads and writes (``Stage``).
+
+Shapes are tuples of symbols that ``Layout.size`` resolves (MuJoCo Warp's convention):
+
+========== ===============================================================================
+symbol     meaning
+========== ===============================================================================
+n_bodies   N, every body of every world, world-major
+n_verts    V, vertices of every body's outline
+n_worlds   W, worlds of the batch; ``world_edges`` = W + 1
+n_probes   P, probe bodies (their contact force is recorded)
+n_small    S, bodies in the spatial hash (the rest are large: walls, pushers)
+n_large    G, large bodies, checked against every body of their world
+slots      K, contact slots per body
+buffers    2: contact memory alternates between two buffers, step by step
+hash_size  H, buckets of the spatial hash (a power of two)
+scan_blocks H / SCAN, blocks of the hash's two-level prefix sum
+========== ===============================================================================
+
+plus the lengths of the code tables (``energy_terms``, ``body_energy_terms``,
+``status_len``, from ``taichi_ice.codes``).
+
+Pure Python: importing this module never starts Taichi.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import inspect
+import textwrap
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .codes import BodyEnergy, EnergyTerm, Status
+
+# Block length of the spatial hash's two-level prefix sum (broadphase.SpatialHash).
+SCAN = 256
+
+# Element types: "real" is the run's precision (f64 or f32); the rest are fixed. Energies and
+# impulses accumulate over a whole run in f64 whatever the precision, and forces are gathered
+# in 64-bit fixed point (state.FORCE_QUANTUM).
+DTYPES = ("real", "f64", "i32", "i64")
+
+# Where a field's values come from at set-up: "host" (an array that assemble builds), or a
+# constant fill.
+HOST = "host"
+
+
+@dataclass(frozen=True)
+class Var:
+    """One field of the state.
+
+    Attributes:
+        name: attribute name on its group (``model.body_pos``); prefix-first (body_, vert_,
+            world_, contact_, ...).
+        dtype: one of ``DTYPES``.
+        shape: symbols (see the module table) or integers; ``()`` for a scalar.
+        unit: SI unit, ``""`` for dimensionless, ``"id"`` for an index, ``"code"`` for a
+            ``taichi_ice.codes`` member.
+        doc: one line: what it holds.
+        lanes: 1 for a scalar field, 2 for a 2-vector field (``ti.Vector.field(2, ...)``).
+        role: ``"hot"`` (read or written by every step's stages), ``"cold"`` (set-up
+            and bookkeeping, read rarely) or ``"diagnostic"`` (kept only for output: energy
+            terms, overlap areas).
+        when: a ``Layout`` switch that must be true for the field to exist (``"rate_state"``,
+            ``"water"``); otherwise a placeholder of one element keeps kernels uniform.
+        init: ``HOST`` (built by ``assemble``, uploaded by ``state.upload``) or a fill value.
+    """
+
+    name: str
+    dtype: str
+    shape: tuple
+    unit: str
+    doc: str
+    lanes: int = 1
+    role: str = "hot"
+    when: str | None = None
+    init: Any = 0
+
+    def __post_init__(self) -> None:
+        if self.dtype not in DTYPES:
+            raise ValueError(f"{self.name}: dtype {self.dtype!r} not in {DTYPES}")
+        if self.role not in ("hot", "cold", "diagnostic"):
+            raise ValueError(f"{self.name}: role {self.role!r}")
+
+    def item_bytes(self, precision: str) -> int:
+        """Bytes of one element (all lanes) in ``precision`` ('f64' or 'f32')."""
+        dtype = precision if self.dtype == "real" else self.dtype
+        return (
+            self.lanes
+            * np.dtype({"f64": "f8", "f32": "f4", "i32": "i4", "i64": "i8"}[dtype]).itemsize
+        )
+
+    def np_dtype(self, precision: str) -> np.dtype:
+        """NumPy dtype of the field's elements in ``precision``."""
+        dtype = precision if self.dtype == "real" else self.dtype
+        return np.dtype(
+            {"f64": np.float64, "f32": np.float32, "i32": np.int32, "i64": np.int64}[dtype]
+        )
+
+
+def _law_params():
+    # The friction laws own their parameters (names, units, meaning): one model column per
+    # parameter, so adding a parameter to a law adds its column here.
+    from .friction import Coulomb, RateState
+
+    coulomb = [
+        Var(
+            f"world_{p.name}",
+            "real",
+            ("n_worlds",),
+            p.unit,
+            f"Coulomb: {p.doc}",
+            role="cold",
+            when="coulomb",
+            init=HOST,
+        )
+        for p in Coulomb.parameters()
+    ]
+    rate_state = [
+        Var(
+            f"world_{p.name}",
+            "real",
+            ("n_worlds",),
+            p.unit,
+            f"rate-and-state: {p.doc}",
+            role="cold",
+            when="rate_state",
+            init=HOST,
+        )
+        for p in RateState.parameters()
+    ]
+    return coulomb + rate_state
+
+
+# fmt: off
+# Static after set-up (MuJoCo Warp's Model).
+MODEL: tuple[Var, ...] = (
+    Var("body_world", "i32", ("n_bodies",), "id", "world of the body", init=HOST),
+    Var("body_kind", "i32", ("n_bodies",), "code", "codes.BodyKind", init=HOST),
+    Var("body_small", "i32", ("n_bodies",), "", "1 if the body is in the spatial hash, 0 if large", init=HOST),
+    Var("body_inv_mass", "real", ("n_bodies",), "1/kg", "1 / mass; 0 for fixed and kinematic bodies", init=HOST),
+    Var("body_inv_inertia", "real", ("n_bodies",), "1/(kg m^2)", "1 / moment of inertia; 0 likewise", init=HOST),
+    Var("body_mass", "real", ("n_bodies",), "kg", "mass, for the kinetic energy", role="diagnostic", init=HOST),
+    Var("body_inertia", "real", ("n_bodies",), "kg m^2", "moment of inertia about the centroid", role="diagnostic", init=HOST),
+    Var("body_radius", "real", ("n_bodies",), "m", "circumradius about the centroid", init=HOST),
+    Var("body_vert_start", "i32", ("n_bodies",), "id", "first vertex of the body in vert_local", init=HOST),
+    Var("body_vert_count", "i32", ("n_bodies",), "", "vertices of the body (<= max_verts)", init=HOST),
+    Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, init=HOST),
+    Var("body_drag_linear", "real", ("n_bodies",), "kg/m", "quadratic water drag on translation", when="water", init=HOST),
+    Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation", when="water", init=HOST),
+    Var("body_probe", "i32", ("n_bodies",), "id", "probe index of the body, -1 if none", init=HOST),
+    Var("vert_local", "real", ("n_verts",), "m", "outline relative to the centroid, unrotated", lanes=2, init=HOST),
+    Var("world_k_t", "real", ("n_worlds",), "N/m", "tangential stick spring", role="cold", init=HOST),
+    Var("world_c_t", "real", ("n_worlds",), "N s/m", "tangential dashpot", role="cold", init=HOST),
+    Var("world_body_start", "i32", ("world_edges",), "id", "first body of each world (bodies are world-major)", role="cold", init=HOST),
+    Var("large_ids", "i32", ("n_large",), "id", "large bodies, world by world", role="cold", init=HOST),
+    Var("world_large_start", "i32", ("world_edges",), "id", "first large body of each world in large_ids", role="cold", init=HOST),
+)
+
+# Mutable (MuJoCo Warp's Data).
+DATA: tuple[Var, ...] = (
+    Var("body_pos", "real", ("n_bodies",), "m", "centroid position", lanes=2, init=HOST),
+    Var("body_angle", "real", ("n_bodies",), "rad", "orientation, counter-clockwise", init=HOST),
+    Var("body_vel", "real", ("n_bodies",), "m/s", "centroid velocity", lanes=2, init=HOST),
+    Var("body_omega", "real", ("n_bodies",), "rad/s", "angular velocity", init=HOST),
+    Var("body_force_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "contact force gathered this step, fixed point", lanes=2),
+    Var("body_torque_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "contact torque gathered this step, fixed point"),
+    Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic"),
+    Var("contact_partner", "i32", ("buffers", "n_bodies", "slots"), "id", "partner body of each slot, -1 if empty", init=-1),
+    Var("contact_count", "i32", ("buffers", "n_bodies"), "", "used slots of each body"),
+    Var("contact_xi", "real", ("buffers", "n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
+    Var("contact_area", "real", ("buffers", "n_bodies", "slots"), "m^2", "overlap area of the contact this step", role="diagnostic"),
+    Var("contact_elastic", "real", ("buffers", "n_bodies", "slots"), "J", "normal elastic energy stored in the contact", role="diagnostic"),
+    Var("contact_theta", "real", ("buffers", "n_bodies", "slots"), "", "rate-and-state variable theta", when="rate_state"),
+    Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic"),
+    Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
+    Var("status", "i32", ("status_len",), "code", "overflow and divergence flags, codes.Status entries", role="cold"),
+    Var("time_step", "real", (), "s", "dt of the run", role="cold"),
+)
+
+# The spatial hash, rebuilt every step (broadphase.SpatialHash).
+HASH: tuple[Var, ...] = (
+    Var("bucket_count", "i32", ("hash_size",), "", "bodies in each bucket this step"),
+    Var("bucket_start", "i32", ("hash_size",), "id", "first entry of each bucket in sorted_ids"),
+    Var("bucket_fill", "i32", ("hash_size",), "", "scatter cursor while filling"),
+    Var("block_total", "i32", ("scan_blocks",), "", "per-block totals of the two-level scan"),
+    Var("sorted_ids", "i32", ("n_small",), "id", "small body ids, grouped by bucket"),
+    Var("body_cell", "i32", ("n_bodies",), "id", "integer cell of each small body", lanes=2),
+)
+# fmt: on
+
+GROUPS: dict[str, tuple[Var, ...]] = {}
+
+
+def groups() -> dict[str, tuple[Var, ...]]:
+    """``{"model": ..., "data": ..., "hash": ...}``: every declared field by group."""
+    if not GROUPS:
+        GROUPS.update(model=MODEL + tuple(_law_params()), data=DATA, hash=HASH)
+    return GROUPS
+
+
+def var(name: str) -> Var:
+    """The declaration of field ``name`` (in any group)."""
+    for group in groups().values():
+        for v in group:
+            if v.name == name:
+                return v
+    raise KeyError(f"no field {name!r} is declared in taichi_ice.schema")
+
+
+def host_vars() -> tuple[Var, ...]:
+    """Fields whose values ``assemble`` builds (``init == HOST``), in declaration order."""
+    return tuple(v for g in groups().values() for v in g if v.init == HOST)
+
+
+# --------------------------------------------------------------------------------------------
+# Layout: the sizes and compile-time switches of a batch
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Sizes and compile-time switches of a batch (plain Python values; MuJoCo's Option).
+
+    Kernels specialise on everything here (``ti.static``): two batches with the same layout
+    share compiled kernels.
+
+    Attributes:
+        n_bodies, n_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size: sizes
+            (see the module table).
+        max_verts: most vertices of any body (the kernels' local outline matrices).
+        cell_size: edge of a hash cell (m), the diameter of the largest small body.
+        coulomb, rate_state: which friction laws the batch's worlds use.
+        water: water drag is compiled in.
+        theta_method: ``codes.ThetaMethod`` of the state variable (one per batch).
+        contact_stiffness: ``k_e``, N/m per m of contact width (shared by the batch).
+        contact_viscosity: ``k_v``, Pa s per m of contact width.
+        runaway_speed: a dynamic body faster than this (m/s) flags the run as diverged.
+        precision: ``"f64"`` or ``"f32"``, the type of every ``real`` field.
+    """
+
+    n_bodies: int
+    n_verts: int
+    n_worlds: int
+    n_probes: int
+    n_small: int
+    n_large: int
+    slots: int
+    hash_size: int
+    max_verts: int
+    cell_size: float
+    coulomb: bool
+    rate_state: bool
+    water: bool
+    theta_method: int
+    contact_stiffness: float
+    contact_viscosity: float
+    runaway_speed: float
+    precision: str = "f64"
+
+    @property
+    def real(self):
+        """The Taichi type of ``real`` fields (for kernels; imports Taichi when asked)."""
+        import taichi as ti
+
+        return ti.f64 if self.precision == "f64" else ti.f32
+
+    def size(self, symbol) -> int:
+        """The value of a shape symbol (an int passes through)."""
+        if isinstance(symbol, int):
+            return symbol
+        derived = {
+            "world_edges": self.n_worlds + 1,
+            "buffers": 2,
+            "scan_blocks": (self.hash_size + SCAN - 1) // SCAN,
+            "energy_terms": len(EnergyTerm),
+            "body_energy_terms": len(BodyEnergy),
+            "status_len": len(Status),
+        }
+        if symbol in derived:
+            return derived[symbol]
+        value = getattr(self, symbol, None)
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise KeyError(f"unknown shape symbol {symbol!r}")
+        return value
+
+    def shape(self, v: Var) -> tuple[int, ...]:
+        """The field's shape in this layout (before the one-element floor of empty fields)."""
+        return tuple(self.size(s) for s in v.shape)
+
+    def exists(self, v: Var) -> bool:
+        """Whether the field is allocated at its declared shape (its ``when`` switch holds)."""
+        return v.when is None or bool(getattr(self, v.when))
+
+    def replace(self, **changes) -> Layout:
+        return dataclasses.replace(self, **changes)
+
+
+def allocated_shape(layout: Layout, v: Var) -> tuple[int, ...]:
+    """Shape of the Taichi field: a switched-off field has one element; Taichi fields cannot
+    be empty, so a zero-size axis gets one unused element."""
+    if not layout.exists(v):
+        return (1,)
+    return tuple(max(n, 1) for n in layout.shape(v))
+
+
+def field_bytes(layout: Layout) -> dict[str, int]:
+    """Bytes of every allocated field, ``{name: bytes}``."""
+    return {
+        v.name: int(np.prod(allocated_shape(layout, v), dtype=np.int64))
+        * v.item_bytes(layout.precision)
+        for g in groups().values()
+        for v in g
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Host arrays
+# --------------------------------------------------------------------------------------------
+
+
+class HostArrays(Mapping):
+    """The NumPy side of a batch before upload: one array per ``HOST`` field, checked.
+
+    Built by ``assemble``; read by ``state.upload`` and by the NumPy reference
+    (``reference.ReferenceModel``), so both start from the same numbers. Access by name as a
+    mapping or an attribute (``host.body_mass``).
+
+    Raises:
+        ValueError: a field missing, unknown, or not of its declared shape and type.
+    """
+
+    def __init__(self, layout: Layout, arrays: Mapping[str, np.ndarray]):
+        wanted = {v.name: v for v in host_vars() if layout.exists(v)}
+        unknown = set(arrays) - {v.name for v in host_vars()}
+        missing = set(wanted) - set(arrays)
+        if unknown or missing:
+            raise ValueError(f"host arrays: unknown {sorted(unknown)}, missing {sorted(missing)}")
+        self._arrays: dict[str, np.ndarray] = {}
+        for name, v in wanted.items():
+            shape = layout.shape(v) + ((v.lanes,) if v.lanes > 1 else ())
+            dtype = v.np_dtype("f64")  # assembled in float64; upload casts reals
+            a = np.ascontiguousarray(arrays[name], dtype=dtype)
+            if a.shape != shape:
+                raise ValueError(f"host array {name}: shape {a.shape}, declared {shape}")
+            a.flags.writeable = False
+            self._arrays[name] = a
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self._arrays[name]
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        try:
+            return self.__dict__["_arrays"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    def __iter__(self):
+        return iter(self._arrays)
+
+    def __len__(self) -> int:
+        return len(self._arrays)
+
+
+# --------------------------------------------------------------------------------------------
+# Stages: what each kernel reads and writes
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Access:
+    """What one kernel of a stage reads and writes, and how many elements of each.
+
+    Attributes:
+        reads, writes: field names (a field both read and written is in both).
+        per_contact: fields whose traffic scales with the contacts of the step rather than
+            with their declared shape (contact slots: only used slots are touched; the
+            bodies of a contact, gathered by the owner's thread).
+    """
+
+    reads: tuple[str, ...]
+    writes: tuple[str, ...]
+    per_contact: tuple[str, ...] = ()
+
+
+class Stage:
+    """Base of the step's stages: ``ACCESS`` maps each kernel to what it reads and writes.
+
+    ``tests/test_schema.py`` parses every kernel (and the methods it calls) and checks that
+    the fields it touches are exactly those declared, so the declaration cannot drift.
+    """
+
+    ACCESS: Mapping[str, Access] = {}
+
+
+def fields_touched(cls: type, kernel: str) -> tuple[set[str], set[str]]:
+    """(read, written) field names that a kernel of stage class ``cls`` touches, from its
+    source and the source of every method of ``cls`` it calls (transitively).
+
+    A field counts as written when it is (inside) an assignment target or the first argument
+    of a ``ti.atomic_*`` call, and as read wherever it appears except as the target of a
+    plain assignment (so an augmented assignment or an atomic is both). Fields are
+    recognised by name, whatever object they are reached through.
+    """
+    declared = {v.name for g in groups().values() for v in g}
+    reads: set[str] = set()
+    writes: set[str] = set()
+    todo, seen = [kernel], set()
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        func = inspect.unwrap(getattr(cls, name))
+        func = getattr(func, "func", func)  # a Taichi kernel wraps the Python function
+        tree = ast.parse(textwrap.dedent(inspect.getsource(func)))
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and isinstance(node.func.value, ast.Name)
+                and node.func.value.id == "self"
+                and hasattr(cls, node.func.attr)
+            ):
+                todo.append(node.func.attr)
+            targets: list[ast.AST] = []
+            if isinstance(node, ast.Assign):
+                targets = node.targets
+            elif isinstance(node, ast.AugAssign):
+                targets = [node.target]
+                reads.update(_field_names(node.target, declared))
+            elif (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and node.func.attr.startswith("atomic_")
+                and node.args
+            ):
+                targets = [node.args[0]]
+            for t in targets:
+                writes.update(_field_names(t, declared))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and node.attr in declared:
+                if not _is_target(node, tree):
+                    reads.add(node.attr)
+    return reads, writes
+
+
+def _field_names(node: ast.AST, declared: set[str]) -> set[str]:
+    """Declared field names reached as attributes inside an assignment target."""
+    while isinstance(node, ast.Subscript):
+        node = node.value
+    if isinstance(node, ast.Attribute) and node.attr in declared:
+        return {node.attr}
+    if isinstance(node, ast.Tuple):
+        return set().union(*(_field_names(e, declared) for e in node.elts))
+    return set()
+
+
+def _is_target(attr: ast.Attribute, tree: ast.AST) -> bool:
+    """True if ``attr`` is (inside) the target of a plain assignment, which writes without
+    reading. (An augmented assignment or an atomic reads and writes.)"""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign):
+            for t in node.targets:
+                if any(base is attr for base in _target_bases(t)):
+                    return True
+    return False
+
+
+def _target_bases(node: ast.AST) -> list[ast.AST]:
+    """The objects an assignment target stores into: ``a.f[i][j]`` -> ``a.f`` (the indices,
+    which are read, are not bases)."""
+    if isinstance(node, ast.Tuple):
+        return [b for e in node.elts for b in _target_bases(e)]
+    while isinstance(node, ast.Subscript):
+        node = node.value
+    return [node]
+
+
+def traffic(stages: Mapping[str, type], layout: Layout, contacts: float) -> dict[str, float]:
+    """Bytes per step that each kernel must move, from the stages' declarations.
+
+    Compulsory traffic: each element a kernel declares is counted once per launch (a
+    neighbour's data gathered again is taken to hit the cache), reads and writes separately,
+    so the bound it gives is optimistic. Switched-off fields (``when``) cost nothing. A
+    ``per_contact`` field is charged for ``contacts`` elements (one per contact of the step,
+    two for body data, which both bodies of a contact need) instead of its declared shape.
+
+    Args:
+        stages: ``{"hash": SpatialHash, ...}``: stage classes by the name their kernels are
+            reported under (``hash.build``).
+        layout: the batch's layout.
+        contacts: contacts of the step.
+
+    Returns:
+        ``{"stage.kernel": bytes}`` and ``"total"``.
+    """
+    out: dict[str, float] = {}
+    for stage_name, cls in stages.items():
+        for kernel, access in cls.ACCESS.items():
+            total = 0.0
+            for name in (*access.reads, *access.writes):
+                v = var(name)
+                if not layout.exists(v):
+                    continue
+                if name in access.per_contact:
+                    # Only the slots of this step's contacts are touched, and only the
+                    # bodies in a contact; other axes (energy columns) stay whole.
+                    rest = [
+                        layout.size(s) for s in v.shape if s not in ("buffers", "n_bodies", "slots")
+                    ]
+                    per = contacts if "slots" in v.shape else min(layout.n_bodies, 2.0 * contacts)
+                    elements = per * float(np.prod(rest, dtype=np.float64))
+                else:
+                    elements = float(np.prod(layout.shape(v), dtype=np.float64))
+                total += elements * v.item_bytes(layout.precision)
+            out[f"{stage_name}.{kernel}"] = total
+    out["total"] = sum(out.values())
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The documentation table
+# --------------------------------------------------------------------------------------------
+
+
+def markdown_table() -> str:
+    """docs/state.md: every field, grouped, with type, shape, unit, role and meaning."""
+    lines = [
+        "# The state of a batch",
+        "",
+        "Generated from `taichi_ice/schema.py` by `python -m taichi_ice.schema > docs/state.md`;",
+        "a test keeps the two equal. `real` is the run's precision (f64 or f32). A field whose",
+        "`when` switch is off is allocated with one unused element.",
+        "",
+    ]
+    titles = {
+        "model": "Model: static after set-up",
+        "data": "Data: mutable",
+        "hash": "Spatial hash: rebuilt every step",
+    }
+    for group, fields in groups().items():
+        lines += [
+            f"## {titles[group]}",
+            "",
+            "| field | type | shape | unit | role | meaning |",
+            "|---|---|---|---|---|---|",
+        ]
+        for v in fields:
+            dtype = v.dtype if v.lanes == 1 else f"{v.dtype} x {v.lanes}"
+            shape = " x ".join(str(s) for s in v.shape) or "scalar"
+            role = v.role + (f", if {v.when}" if v.when else "")
+            lines.append(f"| `{v.name}` | {dtype} | {shape} | {v.unit} | {role} | {v.doc} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(markdown_table(), end="")

@@ -1,0 +1,104 @@
+"""Batch assembly (taichi_ice.assemble) and the energy budget (taichi_ice.budget), no kernels.
+
+- A batch refuses worlds that disagree on what one set of kernels compiles in (ice, water,
+  kind of law, the state integrator: a batch mixing integrators once ran every world with the
+  first world's), naming the world and what differs.
+- Per-world parameters are the world's own: a world's columns are the same alone and in any
+  batch (which is why a batched world equals the world alone).
+- The budget's residual and breach test against hand-made terms.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from taichi_ice import budget
+from taichi_ice.assemble import MAX_VERTS_LIMIT, assemble
+from taichi_ice.codes import EnergyTerm
+from taichi_ice.errors import ScenarioError
+from taichi_ice.friction import Coulomb, RateState
+from taichi_ice.scenario import load_scenario, scene_from_dict
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def pushed():
+    return load_scenario(ROOT / "scenarios" / "pushed_field.toml")
+
+
+@pytest.mark.parametrize(
+    ("other", "message"),
+    [
+        (lambda s: s.with_friction(RateState(method="rk4")), "integrator"),
+        (lambda s: s.with_friction(Coulomb(0.3)), "kind of friction law"),
+    ],
+)
+def test_worlds_that_cannot_share_kernels_are_refused(pushed, other, message):
+    """Mixing the state integrator or the kind of law is an error naming world 1."""
+    base = pushed.with_friction(RateState())
+    with pytest.raises(ValueError, match=f"world 1 .*{message}"):
+        assemble([base, other(base)])
+
+
+def test_worlds_with_other_ice_are_refused(pushed):
+    """The [ice] table is shared by a batch."""
+    raw = dict(pushed.raw)
+    raw["ice"] = {**raw.get("ice", {}), "thickness": 0.5}
+    with pytest.raises(ValueError, match=r"world 1 .*\[ice\]"):
+        assemble([pushed, scene_from_dict(raw)])
+
+
+def test_a_world_has_the_same_columns_alone_and_in_a_batch(pushed):
+    """Law parameters and the tangential spring of a world do not depend on its batch."""
+    a = pushed.with_friction(RateState(t_c=2.0))
+    b = pushed.reseeded(7).with_friction(RateState(B=0.2))
+    alone = assemble([b]).host
+    batch = assemble([a, b]).host
+    for name in ("world_B", "world_t_c", "world_k_t", "world_c_t"):
+        assert batch[name][1] == alone[name][0], name
+    assert batch["world_t_c"].tolist() == [2.0, 3.0]
+    start = batch["world_body_start"]
+    np.testing.assert_array_equal(batch["body_pos"][start[1] : start[2]], alone["body_pos"])
+
+
+def test_too_many_vertices_is_a_scene_error_naming_the_body():
+    """A polygon beyond the kernels' vertex limit is refused before any field exists."""
+    n = MAX_VERTS_LIMIT + 1
+    angles = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    scene = scene_from_dict(
+        {
+            "simulation": {"duration": 1.0},
+            "body": [
+                {
+                    "name": "round",
+                    "shape": "polygon",
+                    "vertices": np.stack([np.cos(angles), np.sin(angles)], 1).tolist(),
+                    "position": [0.0, 0.0],
+                }
+            ],
+        }
+    )
+    with pytest.raises(ScenarioError, match=f"'round' has {n} vertices"):
+        assemble([scene])
+
+
+def test_budget_residual_and_breach_on_hand_made_terms():
+    """residual = (kinetic + elastic)(0) + work in - held - dissipated; a breach is energy
+    created beyond half of what came in."""
+    start = np.zeros((2, len(EnergyTerm)))
+    start[:, EnergyTerm.KINETIC] = 10.0
+    now = np.zeros((2, len(EnergyTerm)))
+    now[:, EnergyTerm.WORK_IN] = 5.0
+    now[:, EnergyTerm.FRICTION] = 6.0
+    now[0, EnergyTerm.KINETIC] = 8.0  # 15 in, 14 accounted: 1 J went missing
+    now[1, EnergyTerm.KINETIC] = 17.0  # 15 in, 23 accounted: 8 J created (> 7.5)
+    terms, initial = budget.as_series(now), budget.as_series(start)
+    np.testing.assert_allclose(budget.residual(terms, initial), [1.0, -8.0])
+    np.testing.assert_allclose(budget.came_in(terms, initial), [15.0, 15.0])
+    assert budget.breached(now, start).tolist() == [1]
+    assert budget.SERIES[EnergyTerm.WORK_IN] == "work_in"
+    assert budget.SERIES[EnergyTerm.FRICTION] == "friction_energy"

@@ -1,0 +1,119 @@
+"""The state's one declaration (taichi_ice.schema) against what uses it.
+
+- Every stage's kernels touch exactly the fields their ACCESS declares (parsed from the
+  kernel source), so the traffic model and a reader see what the code does.
+- The Taichi fields a World allocates have the declared shapes and types; host arrays of the
+  wrong shape are refused; docs/state.md is the generated table.
+- The traffic model against a hand count of one kernel.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from taichi_ice import schema
+from taichi_ice.assemble import assemble
+from taichi_ice.scenario import load_scenario
+from taichi_ice.state import ti_dtype
+from taichi_ice.world import STAGES, World
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize(
+    ("stage", "kernel"),
+    [(name, kernel) for name, cls in STAGES.items() for kernel in cls.ACCESS],
+)
+def test_stage_declares_exactly_the_fields_its_kernel_touches(stage, kernel):
+    """reads and writes of each kernel (and the methods it calls) equal its declaration."""
+    cls = STAGES[stage]
+    reads, writes = schema.fields_touched(cls, kernel)
+    access = cls.ACCESS[kernel]
+    assert reads == set(access.reads), (stage, kernel, reads ^ set(access.reads))
+    assert writes == set(access.writes), (stage, kernel, writes ^ set(access.writes))
+    assert set(access.per_contact) <= reads | writes
+
+
+def test_fields_touched_tells_reads_from_writes():
+    """A plain assignment writes, an augmented one and an atomic read and write, an index
+    inside a target is read."""
+
+    class Probe(schema.Stage):
+        def kernel(self):
+            d = self.data
+            d.body_pos[0] = d.body_vel[1]
+            d.body_angle[0] += 1.0
+            d.sorted_ids[d.bucket_start[0] + ti.atomic_add(d.bucket_fill[0], 1)] = 0
+            self.helper()
+
+        def helper(self):
+            self.data.status[0] = self.data.time_step[None]
+
+    reads, writes = schema.fields_touched(Probe, "kernel")
+    assert writes == {"body_pos", "body_angle", "sorted_ids", "bucket_fill", "status"}
+    assert reads == {"body_vel", "body_angle", "bucket_start", "bucket_fill", "time_step"}
+
+
+@pytest.fixture(scope="module")
+def world(taichi_runtime) -> World:
+    return World([load_scenario(ROOT / "scenarios" / "pushed_field.toml")])
+
+
+def test_allocated_fields_have_their_declared_shape_and_type(world):
+    """Every declared field exists on its group with the declared shape, lanes and dtype."""
+    holders = {"model": world.model, "data": world.data, "hash": world.hash}
+    for group, decls in schema.groups().items():
+        for v in decls:
+            field = getattr(holders[group], v.name)
+            assert field.shape == schema.allocated_shape(world.layout, v), v.name
+            assert field.dtype == ti_dtype(v, world.layout), v.name
+            assert getattr(field, "n", 1) == v.lanes, v.name
+
+
+def test_uploaded_host_arrays_read_back_unchanged(world):
+    """state.upload copies every host array into its field (f64: bit for bit)."""
+    for v in schema.host_vars():
+        if not world.layout.exists(v):
+            continue
+        holder = world.model if hasattr(world.model, v.name) else world.data
+        got = getattr(holder, v.name).to_numpy()
+        want = world.host[v.name]
+        np.testing.assert_array_equal(got[: len(want)], want, err_msg=v.name)
+
+
+def test_host_arrays_of_the_wrong_shape_are_refused():
+    """A host array that does not match its declaration is an error naming it."""
+    batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
+    arrays = dict(batch.host)
+    arrays["body_mass"] = np.zeros(5)
+    with pytest.raises(ValueError, match="body_mass"):
+        schema.HostArrays(batch.layout, arrays)
+    del arrays["body_mass"]
+    with pytest.raises(ValueError, match=r"missing.*body_mass"):
+        schema.HostArrays(batch.layout, arrays)
+
+
+def test_docs_state_table_is_generated_from_the_schema():
+    """docs/state.md is exactly schema.markdown_table() (regenerate it when this fails)."""
+    text = (ROOT / "docs" / "state.md").read_text()
+    assert text == schema.markdown_table(), "run: python -m taichi_ice.schema > docs/state.md"
+
+
+def test_traffic_model_counts_the_integrator_by_hand():
+    """integrator.advance moves, per body and f64: reads 8 scalars, 4 vectors, the i64 force
+    and torque, 4 energy terms; writes back the same minus the model, plus the status."""
+    batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
+    layout = batch.layout.replace(n_bodies=1000, n_probes=0, water=False)
+    n = layout.n_bodies
+    # reads: probe, kind (i32); force_ext (2 x f64); inv_mass, inv_inertia (f64); force_q
+    # (2 x i64), torque_q (i64); vel (2 x f64), omega, pos (2 x f64), angle (f64); energy
+    # (4 x f64); time_step (f64). No probes: probe_impulse moves nothing.
+    reads = n * (4 + 4 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 32) + 8
+    # writes: force_q, torque_q, vel, omega, pos, angle, energy; status (3 x i32).
+    writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 32) + 12
+    got = schema.traffic({"integrator": STAGES["integrator"]}, layout, contacts=0)
+    assert got["integrator.advance"] == reads + writes

@@ -82,8 +82,9 @@ def assemble(
 
     Args:
         scenes: the worlds. They must share the ice properties, the water table (present or
-            not), the kind of friction law and, for rate-and-state, its integrator; the law's
-            parameters and everything else may differ.
+            not) and the integrator of theta (laws that have one); the friction laws (Coulomb,
+            rate-and-state and its variants), their parameters and everything else may
+            differ.
         dt: time step (s); default the smallest ``scene.dt``.
         precision: 'f64' or 'f32'.
         slots: contact slots per body; default ``DEFAULT_SMALL_SLOTS`` plus the most large
@@ -113,23 +114,26 @@ def assemble(
         )
 
     arrays, sizes = _bodies(scenes)
-    arrays.update(_worlds(scenes))
     first = scenes[0]
-    law = first.friction
-    rate_state = law.name == "rate-state"
+    coulomb = all(s.friction.name == "coulomb" for s in scenes)
+    arrays.update(_worlds(scenes, coulomb))
+    methods = {s.friction.method for s in scenes if hasattr(s.friction, "method")}
     large_per_world = sizes.pop("large_per_world")
     layout = Layout(
         **sizes,
         slots=int(slots) if slots else DEFAULT_SMALL_SLOTS + int(large_per_world),
         hash_size=hash_size_for(sizes["n_small"]),
-        coulomb=law.name == "coulomb",
-        rate_state=rate_state,
+        coulomb=coulomb,
+        rate_state=not coulomb,
         water=first.water is not None,
-        theta_method=int(ThetaMethod.from_label(law.method))
-        if rate_state
+        theta_method=int(ThetaMethod.from_label(methods.pop()))
+        if methods
         else int(ThetaMethod.EXPONENTIAL),
         contact_stiffness=first.ice.contact_stiffness,
         contact_viscosity=first.ice.contact_viscosity,
+        tangential_stiffness=first.ice.tangential_stiffness,
+        crushing=first.ice.crushing_strength is not None,
+        crushing_force=(first.ice.crushing_strength or 0.0) * first.ice.thickness,
         runaway_speed=_runaway_speed(scenes, dt),
         precision=precision,
     )
@@ -154,15 +158,16 @@ def _check_shared(scenes: tuple) -> None:
             raise ValueError(f"{where} the [ice] table; all worlds of a batch share it")
         if s.water != first.water:
             raise ValueError(f"{where} the [water] table; all worlds of a batch share it")
-        if s.friction.name != first.friction.name:
+    # The laws may mix (Coulomb, rate-and-state and its variants, any parameters); the
+    # integrator of theta is compiled in, so the laws that have one must agree on it.
+    methods = [(w, s) for w, s in enumerate(scenes) if hasattr(s.friction, "method")]
+    for w, s in methods[1:]:
+        w0, s0 = methods[0]
+        if s.friction.method != s0.friction.method:
             raise ValueError(
-                f"{where} the kind of friction law ({s.friction.name} against "
-                f"{first.friction.name}); a batch runs one kind (its parameters may differ)"
-            )
-        if getattr(s.friction, "method", None) != getattr(first.friction, "method", None):
-            raise ValueError(
-                f"{where} the rate-and-state integrator ({s.friction.method} against "
-                f"{first.friction.method}); the kernels compile one"
+                f"world {w} ({s.source}) differs from world {w0} ({s0.source}) in the "
+                f"rate-and-state integrator ({s.friction.method} against "
+                f"{s0.friction.method}); the kernels compile one"
             )
 
 
@@ -276,32 +281,16 @@ def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
     return out, sizes
 
 
-def _worlds(scenes: tuple) -> dict[str, np.ndarray]:
-    """Per-world arrays: the friction law's columns and the tangential spring-dashpot."""
-    law_class = type(scenes[0].friction)
-    out = {
-        f"world_{p.name}": np.array([getattr(s.friction, p.name) for s in scenes], dtype=float)
-        for p in law_class.parameters()
-    }
-    k_t, c_t = [], []
-    for s in scenes:
-        width = characteristic_width(s)
-        ratio = s.ice.tangential_stiffness
-        k_t.append(ratio * s.ice.contact_stiffness * width)
-        c_t.append(ratio * s.ice.contact_viscosity * width)
-    out["world_k_t"] = np.array(k_t)
-    out["world_c_t"] = np.array(c_t)
+def _worlds(scenes: tuple, coulomb: bool) -> dict[str, np.ndarray]:
+    """Per-world columns of the friction law: ``world_mu`` if every world is Coulomb, else
+    every world's ``contact_row`` (``friction``), which any law gives."""
+    if coulomb:
+        return {"world_mu": np.array([s.friction.mu for s in scenes], dtype=float)}
+    rows = [s.friction.contact_row() for s in scenes]
+    out = {f"world_{k}": np.array([r[k] for r in rows], dtype=float) for k in rows[0]}
+    for k in ("memory", "rest_rule"):
+        out[f"world_{k}"] = out[f"world_{k}"].astype(np.int32)
     return out
-
-
-def characteristic_width(scene) -> float:
-    """Longest edge of any dynamic body of a scene (m): the widest contact, which sets the
-    tangential stiffness. Per world, so that a world runs the same alone or in a batch."""
-    width = 0.0
-    for b in scene.bodies:
-        if b.kind == BodyKind.DYNAMIC.label:
-            width = max(width, geometry.longest_edge(b.vertices))
-    return width if width > 0 else 1.0
 
 
 def _runaway_speed(scenes: tuple, dt: float) -> float:
@@ -322,6 +311,5 @@ __all__ = [
     "RUNAWAY_STEP_FRACTION",
     "Batch",
     "assemble",
-    "characteristic_width",
     "hash_size_for",
 ]

@@ -4,9 +4,13 @@ They exist for the tests that hold each Taichi function against its NumPy twin o
 random inputs, for the benchmarks, and for studies that integrate thousands of interfaces:
 
 - ``respond_batch_ti`` / ``respond_batch``: many sliding interfaces, each following its own
-  slip-rate history under its own rate-and-state parameters (``friction``'s functions);
+  slip-rate history under its own rate-and-state parameters (``friction``'s functions). They
+  integrate the state equation with ``x = ln(max(V, v_star) / v_star)`` at every speed, which
+  is ``RateState(below_v_star="healing").respond``; the paper's rule is a per-sample reset
+  that ``RateState.respond`` applies;
 - ``overlap_batch_ti``: the overlap and separating-axis functions of ``geometry`` on many
-  polygon pairs (``geometry.overlap`` and friends are the NumPy twins).
+  polygon pairs (``geometry.overlap`` and friends are the NumPy twins);
+- ``contact_friction_batch_ti``: the friction of many DEM contacts (``slip``).
 
 The engine itself does not use them: its stages call the same ``_ti`` functions from their
 own kernels.
@@ -37,6 +41,7 @@ from .friction import (
     theta_step_ti,
 )
 from .geometry import min_penetration_axis_ti, overlap_ti, sat_separated_ti
+from .slip import NEWTON_TOLERANCE, contact_friction_ti
 
 # --------------------------------------------------------------------------------------------
 # Many sliding interfaces at once
@@ -365,3 +370,67 @@ def overlap_batch_ti(p, n_p, q, n_q) -> BatchOverlap:
     if batch:
         _overlap_batch_kernel(p, n_p, q, n_q, p.shape[1], q.shape[1], *out)
     return out._replace(separated=out.separated.astype(bool))
+
+
+# --------------------------------------------------------------------------------------------
+# Friction at many contacts at once
+# --------------------------------------------------------------------------------------------
+
+
+@ti.kernel
+def _contact_friction_kernel(
+    inputs: ti.types.ndarray(ndim=2),
+    codes: ti.types.ndarray(ndim=2),
+    out: ti.types.ndarray(ndim=2),
+    method: ti.template(),
+    tol: ti.template(),
+):
+    # inputs (N, 10): theta, f_trial, f_n, K, dt, A, B, mu0, v_star, t_c; codes (N, 2):
+    # memory, rest rule; out (N, 3): mu, theta_new, V.
+    for i in range(inputs.shape[0]):
+        mu, theta, v = contact_friction_ti(
+            inputs[i, 0],
+            inputs[i, 1],
+            inputs[i, 2],
+            inputs[i, 3],
+            inputs[i, 4],
+            inputs[i, 5],
+            inputs[i, 6],
+            inputs[i, 7],
+            inputs[i, 8],
+            inputs[i, 9],
+            codes[i, 0],
+            codes[i, 1],
+            method,
+            tol,
+        )
+        out[i, 0] = mu
+        out[i, 1] = theta
+        out[i, 2] = v
+
+
+def contact_friction_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.ndarray:
+    """``slip.contact_friction_ti`` on N contacts at once (for the twin tests).
+
+    Args:
+        inputs: ``(N, 10)`` rows (theta, f_trial, f_n, K, dt, A, B, mu0, v_star, t_c).
+        codes: ``(N, 2)`` int rows (memory, rest rule).
+        method: ``codes.ThetaMethod`` (compile-time).
+
+    Returns:
+        ``(N, 3)`` rows (mu, theta_new, V) in the running precision.
+    """
+    if backend.current() is None:
+        backend.init("cpu", "f64")
+    precision = backend.current()[1]
+    real = backend.real_dtype(precision)
+    inputs = np.ascontiguousarray(inputs, dtype=real)
+    codes = np.ascontiguousarray(codes, dtype=np.int32)
+    if inputs.ndim != 2 or inputs.shape[1] != 10 or codes.shape != (inputs.shape[0], 2):
+        raise ValueError(
+            f"inputs must be (N, 10) and codes (N, 2); got {inputs.shape}, {codes.shape}"
+        )
+    out = np.zeros((inputs.shape[0], 3), dtype=real)
+    if inputs.shape[0]:
+        _contact_friction_kernel(inputs, codes, out, int(method), NEWTON_TOLERANCE[precision])
+    return out

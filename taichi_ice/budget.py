@@ -1,10 +1,11 @@
 """The energy budget of a world: its terms, the energy that came in, and the residual.
 
     came_in  = (kinetic + elastic)(0) + work_in
-    residual = came_in - (kinetic + elastic + friction + viscous + drag)
+    residual = came_in - (kinetic + elastic + friction + viscous + drag + crushing)
 
 ``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
-of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water;
+of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water,
+``crushing`` the overlap beyond the ice's strength (0 unless ``[ice] crushing_strength``);
 ``kinetic`` and ``elastic`` are what the world holds now (the overlaps and the tangential
 springs). The residual is the time discretisation error of the explicit step: it shrinks
 with dt, and a large negative one (energy created) means the integration broke down.
@@ -29,7 +30,7 @@ SERIES: tuple[str, ...] = tuple(
 )
 # The terms that hold energy now and the ones that accumulate its losses.
 HELD = ("kinetic_energy", "elastic_energy")
-DISSIPATED = ("friction_energy", "viscous_energy", "drag_energy")
+DISSIPATED = ("friction_energy", "viscous_energy", "drag_energy", "crushing_energy")
 
 # The run is stopped as diverged once a world holds or has dissipated this fraction more
 # energy than came in: an explicit step past its stability limit creates energy from nothing,
@@ -53,7 +54,8 @@ def as_series(table: np.ndarray) -> dict[str, np.ndarray]:
 
 def _initial(terms: Mapping[str, Any]) -> dict[str, Any]:
     # The first sample of each series: a run's budget starts at t = 0.
-    return {k: np.asarray(terms[k]).reshape(-1)[0] for k in SERIES}
+    # (Files written before the crushing term have no crushing_energy: it was 0.)
+    return {k: np.asarray(terms.get(k, 0.0)).reshape(-1)[0] for k in SERIES}
 
 
 def came_in(terms: Mapping[str, Any], initial: Mapping[str, Any] | None = None):
@@ -76,7 +78,7 @@ def residual(terms: Mapping[str, Any], initial: Mapping[str, Any] | None = None)
     initial = _initial(terms) if initial is None else initial
     out = came_in(terms, initial)
     for name in HELD + DISSIPATED:
-        out = out - np.asarray(terms[name])
+        out = out - np.asarray(terms.get(name, 0.0))
     return out
 
 

@@ -23,7 +23,8 @@ EXAMPLES = {
   taichi-ice validate --out out/validation          # Figure 3, exact solutions, stability
   taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)""",
     "paper": """examples:
-  taichi-ice paper --out out/paper                  # Figures 3-6, budget, spread over 16 layouts
+  taichi-ice paper --out out/paper                  # Figures 3-6, budget, spread over 16 layouts,
+                                                    # variants of the law, ice strength
   taichi-ice paper --out out/paper --seeds 0        # the four single runs only
   taichi-ice paper --out /tmp/short --until 2 --seeds 2   # a smoke run""",
     "ensemble": """examples:
@@ -117,6 +118,7 @@ def _cmd_paper(args) -> int:
         precision=args.precision,
         progress=not args.quiet,
         quick=args.quick,
+        extras=not args.paper_only,
     )
     return 0
 
@@ -241,6 +243,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", default=None, help="scene file (default scenarios/pillar.toml)")
     _engine_options(p)
     p.add_argument("--quick", action="store_true", help="small sizes for Figure 3 (for tests)")
+    p.add_argument(
+        "--paper-only",
+        action="store_true",
+        help="only the paper's four models: skip the variants (healing below v_star, "
+        "steady-state, memory-only) over the same layouts and the two runs with an ice "
+        "strength",
+    )
 
     p = add(
         "ensemble",

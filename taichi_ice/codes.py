@@ -68,6 +68,7 @@ class EnergyTerm(_Labelled):
     WORK_IN = 3  # work done by kinematic bodies and external forces
     KINETIC = 4  # kinetic energy, translational + rotational
     ELASTIC = 5  # elastic energy in overlaps and tangential springs
+    CRUSHING = 6  # dissipated by crushing: overlap beyond the ice's strength, not recovered
 
 
 class BodyEnergy(_Labelled):
@@ -78,6 +79,18 @@ class BodyEnergy(_Labelled):
     VISCOUS = 1  # dashpot work of the contacts this body owns
     DRAG = 2  # water drag dissipation on this body
     WORK = 3  # work done by this body (kinematic) or on it by its external force
+    CRUSHING = 4  # crushing work of the contacts this body owns
+
+
+class RestRule(_Labelled):
+    """What a rate-and-state contact's memory does while it slides slower than ``v_star``
+    (``below_v_star`` of the laws; ``slip.contact_friction``)."""
+
+    PAPER = 0  # the paper: mu = mu0 exactly; the interface ends, and one that slides again
+    #            is a new interface, its theta in equilibrium at its slip rate
+    HEALING = 1  # theta keeps relaxing toward 0 (the equilibrium at v_star) over t_c, and
+    #              mu = max(mu0 + theta, 0): the aging law's healing
+    FROZEN = 2  # theta is held, mu = max(mu0 + theta, 0), until the contact slides again
 
 
 class Status(_Labelled):
@@ -96,4 +109,12 @@ class OverlapKind(_Labelled):
     FALLBACK = 2  # containment, collinear edges or more than two crossings: SAT axis
 
 
-__all__ = ["BodyEnergy", "BodyKind", "EnergyTerm", "OverlapKind", "Status", "ThetaMethod"]
+__all__ = [
+    "BodyEnergy",
+    "BodyKind",
+    "EnergyTerm",
+    "OverlapKind",
+    "RestRule",
+    "Status",
+    "ThetaMethod",
+]

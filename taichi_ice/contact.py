@@ -4,18 +4,23 @@ For every candidate pair the owner body's thread clips the two outlines
 (``geometry.overlap_ti``) and applies:
 
 - normal force  ``F_n = k_e A + k_v L v_n``, no tension (``F_n >= 0``); ``A`` the overlap
-  area, ``L`` the contact width (chord), ``v_n`` the approach speed along the normal;
-- tangential force from a stick spring ``k_t`` and dashpot ``c_t`` on the tangential stretch
-  ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979): beyond the cap the contact slips,
-  the spring-dashpot relaxes toward the cap and the slip distance times the cap is
-  frictional work;
-- ``mu`` from the batch's law: Coulomb, or rate-and-state with ``theta`` carried by the
-  contact, started in equilibrium at its first slip rate and advanced with
-  ``friction.theta_step`` (Lishman et al. 2013).
+  area, ``L`` the contact width (chord), ``v_n`` the approach speed along the normal. With an
+  ice strength (``[ice] crushing_strength``) the elastic force is capped at strength x
+  thickness x L: the overlap beyond the cap is crushed (``crush``), not recovered, and its
+  work is booked as crushing;
+- tangential force from a stick spring ``k_t = ratio k_e L`` and dashpot
+  ``c_t = ratio k_v L`` (both proportional to the contact width, like the normal ones) on the
+  tangential stretch ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979): beyond the cap
+  the contact slips, the spring-dashpot relaxes toward the cap and the slip distance times
+  the cap is frictional work;
+- ``mu`` from the world's law: Coulomb, or rate-and-state (and its variants) through
+  ``slip.contact_friction_ti``: the sliding rate solved in the step, ``theta`` carried by the
+  contact while it slides, and the rule below ``v_star`` (Lishman et al. 2013).
 
 Ownership: each pair is handled once, by a dynamic body if exactly one is dynamic, else by
 the lower id; small-large pairs by the small body. The owner keeps the contact's memory
-(partner, ``xi``, ``theta``, stored elastic energy; and the overlap area, for output) in one
+(partner, ``xi``, ``theta``, stored elastic energy, crushed area; and the overlap area, for
+output) in one
 of its K slots; a pair that no longer overlaps is not written again, so its memory is
 dropped. More than K contacts raise the overflow status, which the simulation turns into an error.
 
@@ -41,9 +46,9 @@ import taichi as ti
 
 from .broadphase import bucket_of
 from .codes import BodyEnergy, BodyKind, Status
-from .friction import rate_state_mu_ti, slip_log_ti, theta_equilibrium_ti, theta_step_ti
 from .geometry import overlap_ti
 from .schema import Access, Layout, Stage
+from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction_ti
 from .state import FORCE_QUANTUM, Data, Model
 
 
@@ -80,6 +85,36 @@ def normal_force(area, width, approach_speed, k_e, k_v):
     """
     elastic = k_e * area
     return max(elastic + k_v * width * approach_speed, 0.0), elastic
+
+
+@ti.func
+def crush_ti(area, crushed, width, k_e, force_per_width):
+    """Taichi twin of :func:`crush`."""
+    cap = force_per_width * width
+    crushed_new = crushed
+    if k_e * (area - crushed) > cap:
+        crushed_new = area - cap / k_e
+    return cap, crushed_new
+
+
+def crush(area, crushed, width, k_e, force_per_width):
+    """The ice's strength: the normal elastic force ``k_e (A - A_c)`` is capped at
+    ``cap = strength x thickness x L``; overlap beyond it is crushed and not recovered.
+
+    Args:
+        area: overlap area ``A`` (m^2). crushed: area crushed so far, ``A_c`` (m^2).
+        width: contact width ``L`` (m). k_e: N/m per m of contact width.
+        force_per_width: strength x thickness (N/m).
+
+    Returns:
+        ``(cap, A_c')``: the cap (N) and the crushed area after this step (m^2): ``A - cap /
+        k_e`` if the elastic force would exceed the cap, else unchanged. The crushing work of
+        the step is ``cap (A_c' - A_c) / L``.
+    """
+    cap = force_per_width * width
+    if k_e * (area - crushed) > cap:
+        crushed = area - cap / k_e
+    return cap, crushed
 
 
 @ti.func
@@ -145,14 +180,14 @@ class ContactStage(Stage):
                 "vert_local",
                 "world_large_start",
                 "large_ids",
-                "world_k_t",
-                "world_c_t",
                 "world_mu",
                 "world_A",
                 "world_B",
                 "world_mu0",
                 "world_v_star",
                 "world_t_c",
+                "world_memory",
+                "world_rest_rule",
                 # Spatial hash
                 "body_cell",
                 "bucket_start",
@@ -169,6 +204,7 @@ class ContactStage(Stage):
                 "contact_xi",
                 "contact_elastic",
                 "contact_theta",
+                "contact_crushed",
                 "body_force_q",
                 "body_torque_q",
                 "body_energy",
@@ -181,6 +217,7 @@ class ContactStage(Stage):
                 "contact_area",
                 "contact_elastic",
                 "contact_theta",
+                "contact_crushed",
                 "body_force_q",
                 "body_torque_q",
                 "body_energy",
@@ -194,6 +231,7 @@ class ContactStage(Stage):
                 "contact_area",
                 "contact_elastic",
                 "contact_theta",
+                "contact_crushed",
                 "body_force_q",
                 "body_torque_q",
                 "body_energy",
@@ -205,6 +243,9 @@ class ContactStage(Stage):
         self.layout, self.model, self.data, self.hash = layout, model, data, spatial_hash
         self.k_e = float(layout.contact_stiffness)
         self.k_v = float(layout.contact_viscosity)
+        self.ratio = float(layout.tangential_stiffness)
+        self.crush = float(layout.crushing_force)
+        self.tol = NEWTON_TOLERANCE[layout.precision]
         self.method = int(layout.theta_method)
         self.maxv = layout.max_verts
         # Bodies whose bounding circles meet a body's: more than its slots are possible
@@ -253,9 +294,15 @@ class ContactStage(Stage):
                     found = s
             xi = 0.0
             elastic = 0.0
+            crushed = 0.0
+            theta = NO_INTERFACE
             if found >= 0:
                 xi = d.contact_xi[cur, i, found]
                 elastic = d.contact_elastic[cur, i, found]
+                if ti.static(self.layout.crushing):
+                    crushed = d.contact_crushed[cur, i, found]
+                if ti.static(self.layout.rate_state):
+                    theta = d.contact_theta[cur, i, found]
             r_i, r_j = point, point + (xi_ - xj_)  # point is relative to body i
             v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
                 d.body_vel[i] + perp(d.body_omega[i], r_i)
@@ -263,38 +310,68 @@ class ContactStage(Stage):
             tangent = ti.Vector([-normal[1], normal[0]])
             approach = -v_rel.dot(normal)
             slip = v_rel.dot(tangent)
-            f_n, f_el = normal_force_ti(area, width, approach, self.k_e, self.k_v)
 
+            # Normal: elastic on the overlap not crushed; with a strength, the overlap beyond
+            # the cap is crushed (kept, not recovered) and its work is booked.
+            cap_n = 0.0
+            crushed_new = crushed
+            if ti.static(self.layout.crushing):
+                cap_n, crushed_new = crush_ti(area, crushed, width, self.k_e, self.crush)
+            f_n, f_el = normal_force_ti(
+                ti.max(area - crushed_new, 0.0), width, approach, self.k_e, self.k_v
+            )
+            crush_work = 0.0
+            if ti.static(self.layout.crushing):
+                f_n = ti.min(f_n, cap_n)
+                if crushed_new > crushed and width > 0.0:
+                    crush_work = cap_n * (crushed_new - crushed) / width
+
+            # Tangential: stick spring and dashpot proportional to the contact width.
+            k_t = self.ratio * self.k_e * width
+            c_t = self.ratio * self.k_v * width
             mu = 0.0
             theta_new = 0.0
             w = m.body_world[i]
             if ti.static(self.layout.rate_state):
-                a_, b_, mu0 = m.world_A[w], m.world_B[w], m.world_mu0[w]
-                v_star, t_c = m.world_v_star[w], m.world_t_c[w]
-                x = slip_log_ti(ti.abs(slip), v_star)
-                theta = theta_equilibrium_ti(x, b_)
-                if found >= 0:
-                    theta = d.contact_theta[cur, i, found]
-                mu = rate_state_mu_ti(theta, x, a_, mu0)
-                theta_new = theta_step_ti(theta, x, x, x, dt, b_, t_c, ti.static(self.method))
+                f_trial = ti.abs(k_t * (xi + slip * dt) + c_t * slip)
+                mu, theta_new, _v = contact_friction_ti(
+                    theta,
+                    f_trial,
+                    f_n,
+                    k_t * dt + c_t,
+                    dt,
+                    m.world_A[w],
+                    m.world_B[w],
+                    m.world_mu0[w],
+                    m.world_v_star[w],
+                    m.world_t_c[w],
+                    m.world_memory[w],
+                    m.world_rest_rule[w],
+                    ti.static(self.method),
+                    ti.static(self.tol),
+                )
             else:
                 mu = m.world_mu[w]
 
             f_t, xi_new, slip_work, damp_work = tangential_force_ti(
-                xi, slip, dt, m.world_k_t[w], m.world_c_t[w], mu * f_n
+                xi, slip, dt, k_t, c_t, mu * f_n
             )
             force = f_n * normal + f_t * tangent  # on j; -force on i
             self.add_force(j, force, cross2(r_j, force))
             self.add_force(i, -force, -cross2(r_i, force))
 
-            # Elastic energy stored in the contact: the work of its elastic force on the
-            # approach. (integral k_e A dA / L equals it only for relative translation;
-            # when the bodies turn, dA / dt = L v_n at the chord's middle, not at the
-            # centroid where the force acts, and the budget kept an error dt does not
-            # shrink.)
-            elastic += f_el * approach * dt
+            # Elastic energy stored in the contact: the work of its elastic forces. Normal:
+            # on the approach, less what crushed. (integral k_e A dA / L equals it only for
+            # relative translation; when the bodies turn, dA / dt = L v_n at the chord's
+            # middle, not at the centroid where the force acts, and the budget kept an
+            # error dt does not shrink.) Tangential: the spring's energy change at this
+            # step's stiffness, which follows the width.
+            elastic += f_el * approach * dt - crush_work
+            elastic += 0.5 * k_t * (xi_new * xi_new - xi * xi)
             d.body_energy[i, BodyEnergy.FRICTION] += slip_work
             d.body_energy[i, BodyEnergy.VISCOUS] += (f_n - f_el) * approach * dt + damp_work
+            if ti.static(self.layout.crushing):
+                d.body_energy[i, BodyEnergy.CRUSHING] += crush_work
 
             if used < self.layout.slots:
                 d.contact_partner[nxt, i, used] = j
@@ -303,6 +380,8 @@ class ContactStage(Stage):
                 d.contact_elastic[nxt, i, used] = elastic
                 if ti.static(self.layout.rate_state):
                     d.contact_theta[nxt, i, used] = theta_new
+                if ti.static(self.layout.crushing):
+                    d.contact_crushed[nxt, i, used] = crushed_new
             used += 1
         return used
 

@@ -1,13 +1,14 @@
 """The energy stage: every world's energy table, from the per-body and per-contact terms.
 
-    work_in = kinetic + elastic + friction + viscous + drag + residual   (``taichi_ice.budget``)
+    work_in = kinetic + elastic + friction + viscous + drag + crushing + residual   (``budget``)
 
 ``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
 of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water;
-``elastic`` what the overlaps (``integral k_e A v_n dt``) and the tangential springs
-(``k_t xi^2 / 2``) hold now. The residual is the discretisation error of the explicit step
-and shrinks with dt. Each world is summed by one thread in body order, so the sums are
-reproducible.
+``crushing`` the work on overlap beyond the ice's strength; ``elastic`` what the contacts
+hold now: the work of their elastic forces, normal (``integral k_e A v_n dt``) and
+tangential (the spring's ``k_t xi^2 / 2`` at each step's stiffness), summed step by step.
+The residual is the discretisation error of the explicit step and shrinks with dt. Each
+world is summed by one thread in body order, so the sums are reproducible.
 """
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
@@ -29,14 +30,12 @@ class EnergyMeter(Stage):
         "snapshot": Access(
             reads=(
                 "world_body_start",
-                "world_k_t",
                 "body_kind",
                 "body_mass",
                 "body_inertia",
                 "body_vel",
                 "body_omega",
                 "contact_count",
-                "contact_xi",
                 "contact_elastic",
                 "body_energy",
             ),
@@ -58,7 +57,7 @@ class EnergyMeter(Stage):
             viscous = ti.cast(0.0, ti.f64)
             drag = ti.cast(0.0, ti.f64)
             work = ti.cast(0.0, ti.f64)
-            k_t = ti.cast(m.world_k_t[w], ti.f64)
+            crushing = ti.cast(0.0, ti.f64)
             for i in range(m.world_body_start[w], m.world_body_start[w + 1]):
                 if m.body_kind[i] == BodyKind.DYNAMIC:
                     kinetic += 0.5 * ti.cast(
@@ -67,15 +66,16 @@ class EnergyMeter(Stage):
                         ti.f64,
                     )
                 for s in range(d.contact_count[cur, i]):
-                    xi = ti.cast(d.contact_xi[cur, i, s], ti.f64)
-                    elastic += ti.cast(d.contact_elastic[cur, i, s], ti.f64) + 0.5 * k_t * xi * xi
+                    elastic += ti.cast(d.contact_elastic[cur, i, s], ti.f64)
                 friction += d.body_energy[i, BodyEnergy.FRICTION]
                 viscous += d.body_energy[i, BodyEnergy.VISCOUS]
                 drag += d.body_energy[i, BodyEnergy.DRAG]
                 work += d.body_energy[i, BodyEnergy.WORK]
+                crushing += d.body_energy[i, BodyEnergy.CRUSHING]
             d.world_energy[w, EnergyTerm.KINETIC] = kinetic
             d.world_energy[w, EnergyTerm.ELASTIC] = elastic
             d.world_energy[w, EnergyTerm.FRICTION] = friction
             d.world_energy[w, EnergyTerm.VISCOUS] = viscous
             d.world_energy[w, EnergyTerm.DRAG] = drag
             d.world_energy[w, EnergyTerm.WORK_IN] = work
+            d.world_energy[w, EnergyTerm.CRUSHING] = crushing

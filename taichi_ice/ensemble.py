@@ -24,6 +24,7 @@ The metrics of one run (``run_metrics``), all from its ``/series``:
 - ``final_force`` (N): mean probe force over the last ``window`` seconds, and ``released``
   (1 or 0): whether it has fallen below a tenth of ``peak_force``, i.e. whether the largest
   jam against the probe had broken by the end.
+- ``crushing_energy`` (J): work done crushing ice beyond its strength (0 without one).
 - ``first_contact`` (s): first sample with a force on a probe (NaN if never).
 - ``residual`` (J) and ``residual_rel``: the energy budget's residual at the end, absolute
   and relative to the energy that came in (initial kinetic + elastic, plus work in).
@@ -46,6 +47,7 @@ METRICS = (
     "peak_force",
     "mean_force",
     "friction_energy",
+    "crushing_energy",
     "concentration",
     "final_force",
     "released",
@@ -102,6 +104,8 @@ def run_metrics(series: dict, window: float = 1.0) -> dict[str, float]:
         # it carries no impulse).
         "mean_force": float(force[1:].mean()) if force.size > 1 else 0.0,
         "friction_energy": float(series["friction_energy"][-1]),
+        # 0 without an ice strength, and in files written before the term existed.
+        "crushing_energy": float(np.asarray(series.get("crushing_energy", [0.0]))[-1]),
         "concentration": concentration(t, series["friction_energy"], window),
         "final_force": final,
         "released": float(peak > 0 and final < RELEASED_FRACTION * peak),

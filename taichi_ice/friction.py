@@ -46,7 +46,7 @@ from typing import Any, ClassVar, Union
 import numpy as np
 import taichi as ti
 
-from .codes import ThetaMethod
+from .codes import RestRule, ThetaMethod
 from .errors import StabilityError
 
 __all__ = [
@@ -356,11 +356,18 @@ class Law:
     @property
     def label(self) -> str:
         """Short name for files and legends: the law's name, then every numeric parameter
-        that differs from its default (``rate-state``, ``rate-state_t_c5``)."""
+        that differs from its default and every choice but the integrator that does
+        (``rate-state``, ``rate-state_t_c5``, ``rate-state_healing``)."""
         changed = [
             f"{p.name}{getattr(self, p.name):g}"
             for p in self.parameters()
             if getattr(self, p.name) != p.default
+        ]
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        changed += [
+            getattr(self, k)
+            for k in self.choices
+            if k != "method" and getattr(self, k) != defaults.get(k)
         ]
         return "_".join([self.name, *changed])
 
@@ -381,6 +388,19 @@ class Coulomb(Law):
         """``mu0.5``: the coefficient, as the paper names its constant-friction models."""
         return f"mu{self.mu:g}"
 
+    def contact_row(self) -> dict[str, float]:
+        """Coulomb as a rate-and-state row (A = B = 0, mu0 = mu, no memory), so that a
+        Coulomb world can share a batch with rate-and-state worlds: its mu is exactly mu."""
+        return {
+            "A": 0.0,
+            "B": 0.0,
+            "mu0": self.mu,
+            "v_star": 1.0,
+            "t_c": 1.0,
+            "memory": 0,
+            "rest_rule": int(RestRule.PAPER),
+        }
+
     def steady_state(self, v: Any) -> np.ndarray:
         """mu at slip rates ``v`` (m/s, any shape): the constant mu."""
         v = np.asarray(v, dtype=np.float64)
@@ -397,22 +417,81 @@ class Coulomb(Law):
         return np.full(t.shape, self.mu)
 
 
+def _respond_rate_state(t, v, A, B, mu0, v_star, t_c, code, rule):
+    """mu and theta of one interface (see ``RateState.respond``); theta is NaN where the
+    interface has ended (below v_star under the paper's rule)."""
+    x = slip_log(v, v_star)
+    x_mid = slip_log(0.5 * (v[:-1] + v[1:]), v_star)
+    dt = np.diff(t)
+    below = (v < v_star).tolist()
+    theta = np.empty_like(x)
+    # Plain floats: one interface is a sequential loop, and NumPy scalars cost more.
+    xs, xm, dts = x.tolist(), x_mid.tolist(), dt.tolist()
+    none = math.nan
+    if below[0]:
+        th = none if rule == RestRule.PAPER else 0.0
+    else:
+        th = float(theta_equilibrium(xs[0], B))
+    theta[0] = th
+    with np.errstate(over="ignore", invalid="ignore"):
+        for n in range(t.size - 1):
+            if below[n + 1] and rule == RestRule.PAPER:
+                th = none  # the interface ends
+            elif below[n + 1] and rule == RestRule.FROZEN and not math.isnan(th):
+                pass  # held while slower than v_star
+            elif math.isnan(th):
+                # A new interface: in equilibrium at its slip rate (0 at or below v_star).
+                th = float(theta_equilibrium(xs[n + 1], B))
+            else:
+                th = float(theta_step(th, xs[n], xm[n], xs[n + 1], dts[n], B, t_c, code))
+            theta[n + 1] = th
+        ended = np.isnan(theta)
+        mu = np.where(ended, mu0, rate_state_mu(np.where(ended, 0.0, theta), x, A, mu0))
+    return mu, theta
+
+
+class _RateStateFamily(Law):
+    """The laws a rate-and-state contact runs: each gives its row of the batch's model
+    (``contact_row``), so that worlds of a batch may mix them."""
+
+    def contact_row(self) -> dict[str, float]:
+        """The model columns of a world under this law: ``A, B, mu0, v_star, t_c`` and the
+        codes ``memory`` (1 if theta is carried) and ``rest_rule`` (``codes.RestRule``)."""
+        raise NotImplementedError
+
+    def slip_log(self, v: Any) -> np.ndarray:
+        """x = ln(max(v, v_star) / v_star) for slip rates ``v`` (m/s, any shape)."""
+        return slip_log(np.asarray(v, dtype=np.float64), self.v_star)
+
+    def steady_state(self, v: Any) -> np.ndarray:
+        """Steady-state friction ``max(mu0 + (A - B) x, 0)`` at slip rates ``v`` (m/s, any
+        shape, >= 0); mu0 at or below v_star."""
+        v = np.asarray(v, dtype=np.float64)
+        if np.any(np.isnan(v)):
+            raise ValueError("v must not be NaN")
+        if np.any(v < 0.0):
+            raise ValueError(f"v is a slip rate and must be >= 0 (m/s); min(v) = {v.min()!r}")
+        row = self.contact_row()
+        x = slip_log(v, row["v_star"])
+        return rate_state_mu(theta_equilibrium(x, row["B"]), x, row["A"], row["mu0"])
+
+
 @dataclasses.dataclass(frozen=True)
-class RateState(Law):
+class RateState(_RateStateFamily):
     """Rate-and-state friction with memory (Lishman et al. 2013, eqs. 2a-b).
 
-        mu        = max(mu0 + theta + A x, 0),      x = ln(max(V, v_star) / v_star)
+        mu        = max(mu0 + theta + A x, 0),      x = ln(V / v_star)
         dtheta/dt = -(theta + B x) / t_c
 
     A new sliding interface starts in equilibrium, ``theta = -B x``, so at constant V the
     friction is ``mu_ss = mu0 + (A - B) x`` (velocity weakening since A < B).
 
-    Below ``v_star`` the paper uses ``mu = mu0``. Here ``x`` is taken as
-    ``ln(max(V, v_star) / v_star)`` in both equations, so below ``v_star`` the rate term is
-    0 and theta relaxes toward 0 (the equilibrium at ``v_star``) with time constant ``t_c``.
-    Hence an interface that starts or rests below ``v_star`` has ``theta = 0`` and exactly
-    ``mu = mu0``; after sliding slows below ``v_star``, mu returns to ``mu0`` as theta
-    decays; and mu is a continuous function of (V, theta) everywhere.
+    Below ``v_star`` the paper uses ``mu = mu0``. ``below_v_star`` chooses what the memory
+    does there (``codes.RestRule``): ``paper`` (default): mu = mu0 exactly, the interface
+    ends, and one that slides again is a new interface in equilibrium; ``healing``: x = 0,
+    theta relaxes toward 0 over t_c and mu = max(mu0 + theta, 0) (the aging law's healing;
+    the state equation read with ``x = ln(max(V, v_star) / v_star)`` everywhere);
+    ``frozen``: theta is held while slower than v_star, mu = max(mu0 + theta, 0).
 
     mu is clamped at 0: right after a fast deceleration from above ``v_star exp(mu0 / B)``
     (about 2.4 cm/s) the unclamped law would be negative.
@@ -424,15 +503,19 @@ class RateState(Law):
         v_star: reference slip rate (m/s), > 0.
         t_c: critical slip time (s), > 0.
         method: default integrator of ``respond``, one of ``RateState.methods``.
+        below_v_star: ``paper``, ``healing`` or ``frozen``.
 
     Raises:
         ValueError: a parameter that is NaN, infinite, negative, or zero where it must be
-            positive (``v_star``, ``t_c``), or an unknown method.
+            positive (``v_star``, ``t_c``), or an unknown method or rule.
     """
 
     name: ClassVar[str] = "rate-state"
     methods: ClassVar[tuple[str, ...]] = METHODS
-    choices: ClassVar[dict[str, tuple[str, ...]]] = {"method": METHODS}
+    choices: ClassVar[dict[str, tuple[str, ...]]] = {
+        "method": METHODS,
+        "below_v_star": RestRule.labels(),
+    }
 
     # Paper defaults at -10 C (Lishman et al. 2013).
     A: float = _param(0.05, "", "direct (rate) coefficient")
@@ -441,27 +524,18 @@ class RateState(Law):
     v_star: float = _param(1e-5, "m/s", "reference slip rate", positive=True)
     t_c: float = _param(3.0, "s", "critical slip time of the state's relaxation", positive=True)
     method: str = "exponential"
+    below_v_star: str = "paper"
 
-    def slip_log(self, v: Any) -> np.ndarray:
-        """x = ln(max(v, v_star) / v_star) for slip rates ``v`` (m/s, any shape)."""
-        return slip_log(np.asarray(v, dtype=np.float64), self.v_star)
-
-    def steady_state(self, v: Any) -> np.ndarray:
-        """Steady-state friction ``max(mu0 + (A - B) x, 0)`` at slip rates ``v`` (m/s).
-
-        Args:
-            v: slip rates (m/s), any shape, >= 0.
-
-        Returns:
-            mu_ss, same shape as ``v``.
-        """
-        v = np.asarray(v, dtype=np.float64)
-        if np.any(np.isnan(v)):
-            raise ValueError("v must not be NaN")
-        if np.any(v < 0.0):
-            raise ValueError(f"v is a slip rate and must be >= 0 (m/s); min(v) = {v.min()!r}")
-        x = slip_log(v, self.v_star)
-        return rate_state_mu(theta_equilibrium(x, self.B), x, self.A, self.mu0)
+    def contact_row(self) -> dict[str, float]:
+        return {
+            "A": self.A,
+            "B": self.B,
+            "mu0": self.mu0,
+            "v_star": self.v_star,
+            "t_c": self.t_c,
+            "memory": 1,
+            "rest_rule": int(RestRule.from_label(self.below_v_star)),
+        }
 
     def respond(
         self,
@@ -475,7 +549,10 @@ class RateState(Law):
         """Friction of one interface under a slip-rate history (NumPy reference path).
 
         The slip rate is taken linear between samples; the interface starts in equilibrium
-        at ``v[0]``.
+        at ``v[0]``. The rule below v_star is applied sample by sample: a sample below
+        v_star ends the interface (``paper``; theta NaN there), holds theta (``frozen``) or
+        steps it with x = 0 (``healing``); the first sample at or above v_star after an end
+        starts a new interface in equilibrium.
 
         Args:
             t: ``(T,)`` strictly increasing times (s); steps may vary.
@@ -497,29 +574,89 @@ class RateState(Law):
         code = method_code(self.method if method is None else method)
         t = _check_times(t)
         v = _check_rates(v, t, (1,))
+        row = self.contact_row()
         if check_stability and t.size > 1:
-            _check_stability(code, float(np.max(np.diff(t))), self.t_c)
-        A, B, mu0, v_star, t_c = self.params
-        x = slip_log(v, v_star)
-        x_mid = slip_log(0.5 * (v[:-1] + v[1:]), v_star)
-        dt = np.diff(t)
-        theta = np.empty_like(x)
-        theta[0] = theta_equilibrium(x[0], B)
-        # Plain floats: one interface is a sequential loop, and NumPy scalars cost more.
-        xs, xm, dts = x.tolist(), x_mid.tolist(), dt.tolist()
-        th = float(theta[0])
-        with np.errstate(over="ignore", invalid="ignore"):
-            for n in range(t.size - 1):
-                th = float(theta_step(th, xs[n], xm[n], xs[n + 1], dts[n], B, t_c, code))
-                theta[n + 1] = th
-            mu = rate_state_mu(theta, x, A, mu0)
+            _check_stability(code, float(np.max(np.diff(t))), row["t_c"])
+        mu, theta = _respond_rate_state(
+            t,
+            v,
+            row["A"],
+            row["B"],
+            row["mu0"],
+            row["v_star"],
+            row["t_c"],
+            code,
+            row["rest_rule"],
+        )
         return (mu, theta) if return_theta else mu
 
 
+@dataclasses.dataclass(frozen=True)
+class MemoryOnly(RateState):
+    """Rate-and-state friction with B = A: mu_ss = mu0 at every speed, so only the
+    transients of the memory remain (a speed step gives a jump of ``A dx`` that decays over
+    t_c back to mu0). Parameters and rules as ``RateState``; ``B`` is ``A``."""
+
+    name: ClassVar[str] = "memory-only"
+    B: float = dataclasses.field(default=0.05, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "B", self.A)
+
+    @classmethod
+    def parameters(cls) -> tuple[Parameter, ...]:
+        return tuple(p for p in super().parameters() if p.name != "B")
+
+
+@dataclasses.dataclass(frozen=True)
+class SteadyState(_RateStateFamily):
+    """The steady-state law of rate-and-state friction: ``mu = max(mu0 + (A - B) x, 0)`` at
+    once (x = ln(V / v_star); mu0 at or below v_star): the rate dependence without memory.
+
+    Args:
+        A, B, mu0, v_star: as ``RateState``.
+    """
+
+    name: ClassVar[str] = "steady-state"
+
+    A: float = _param(0.05, "", "direct (rate) coefficient")
+    B: float = _param(0.112, "", "state coefficient")
+    mu0: float = _param(0.872, "", "friction at the reference slip rate v_star")
+    v_star: float = _param(1e-5, "m/s", "reference slip rate", positive=True)
+
+    def contact_row(self) -> dict[str, float]:
+        return {
+            "A": self.A,
+            "B": self.B,
+            "mu0": self.mu0,
+            "v_star": self.v_star,
+            "t_c": 1.0,  # unused: no memory
+            "memory": 0,
+            "rest_rule": int(RestRule.PAPER),
+        }
+
+    def respond(self, t: Any, v: Any, method: Union[str, None] = None, **_: Any) -> np.ndarray:
+        """mu at every time of a slip-rate history: ``steady_state(v)``."""
+        t = _check_times(t)
+        v = _check_rates(v, t, (1,))
+        if method is not None:
+            method_code(method)
+        return self.steady_state(v)
+
+
 # The laws by name, in the order the documentation lists them.
-LAWS: dict[str, type] = {law.name: law for law in (Coulomb, RateState)}
+LAWS: dict[str, type] = {law.name: law for law in (Coulomb, RateState, SteadyState, MemoryOnly)}
 # Other spellings the command line accepts.
-_ALIASES = {"ratestate": "rate-state", "rate_state": "rate-state", "rs": "rate-state"}
+_ALIASES = {
+    "ratestate": "rate-state",
+    "rate_state": "rate-state",
+    "rs": "rate-state",
+    "steady_state": "steady-state",
+    "steady": "steady-state",
+    "memory_only": "memory-only",
+    "memory": "memory-only",
+}
 
 
 def _law_class(name: str, lenient: bool = False) -> type:

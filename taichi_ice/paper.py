@@ -36,13 +36,26 @@ from .plots import plot_spread
 # The bundled scene (package data), so that the command works from an installed wheel.
 DEFAULT_SCENE = resources.files("taichi_ice").joinpath("scenarios").joinpath("pillar.toml")
 
-MODEL_COLOURS = {"mu0.1": "C0", "mu0.5": "C1", "mu0.9": "C3", "rate-state": "C2"}
+MODEL_COLOURS = {
+    "mu0.1": "C0",
+    "mu0.5": "C1",
+    "mu0.9": "C3",
+    "rate-state": "C2",
+    "rate-state_healing": "C4",
+    "steady-state": "C7",
+    "memory-only": "C5",
+}
 MODEL_TITLES = {
     "mu0.1": r"$\mu$ = 0.1",
     "mu0.5": r"$\mu$ = 0.5",
     "mu0.9": r"$\mu$ = 0.9",
     "rate-state": "rate and state",
+    "rate-state_healing": "rate and state, healing below V*",
+    "steady-state": "steady-state law (rate, no memory)",
+    "memory-only": "memory only (B = A)",
 }
+# Ice strengths (Pa) of the extra single runs under rate-and-state (the paper gives none).
+STRENGTHS = (1e6, 3e6)
 
 # What the paper says of each model (its section "Variable friction within a simple DEM").
 PAPER_FINDINGS = {
@@ -67,6 +80,19 @@ def models():
     ]
 
 
+def variants():
+    """The choices that separate rate from memory, run over the same layouts as the paper's
+    models: the law with today's earlier rule below V* (healing), the steady-state law and
+    memory only. ``(label, law)``."""
+    from .friction import MemoryOnly, RateState, SteadyState
+
+    return [
+        ("rate-state_healing", RateState(below_v_star="healing")),
+        ("steady-state", SteadyState()),
+        ("memory-only", MemoryOnly()),
+    ]
+
+
 def reproduce(
     out: str | Path,
     seeds: int = 16,
@@ -76,6 +102,7 @@ def reproduce(
     precision: str = "f64",
     progress: bool = True,
     quick: bool = False,
+    extras: bool = True,
 ) -> dict:
     """Run the whole reproduction into ``out``; returns the summary written to summary.json.
 
@@ -87,6 +114,8 @@ def reproduce(
         arch, precision: as for ``Simulation``.
         progress: progress bars and a line per model on stderr.
         quick: small sizes for Figure 3 (tests).
+        extras: also run the ``variants`` over the same layouts and rate-and-state with an
+            ice strength of each of ``STRENGTHS`` (the scene's own layout).
     """
     from .scenario import load_scenario
     from .studies import single_interface
@@ -106,7 +135,7 @@ def reproduce(
     base = scene.simulation.seed
     layout_seeds = [base] + [base + k for k in range(1, seeds + 1)]
     results: dict[str, EnsembleResult] = {}
-    for label, law in models():
+    for label, law in models() + (variants() if extras else []):
         _say(
             progress,
             f"paper: {label}: {len(layout_seeds)} layout(s) x {scene.n_bodies} bodies, "
@@ -135,15 +164,37 @@ def reproduce(
             + (f"; FAILED: {ens.failure}" if ens.status != "complete" else ""),
         )
 
+    if extras:
+        from .friction import RateState
+        from .scenario import scene_from_dict
+
+        for strength in STRENGTHS:
+            label = f"rate-state_strength{strength / 1e6:g}MPa"
+            raw = dict(scene.raw)
+            raw["ice"] = {**raw.get("ice", {}), "crushing_strength": strength}
+            strong = scene_from_dict(raw, source=scene.source)
+            _say(progress, f"paper: {label}: the scene's layout, {until:g} s")
+            results[label] = run_ensemble(
+                strong,
+                [base],
+                RateState(),
+                until=until,
+                out=[runs / f"{label}.h5"],
+                arch=arch,
+                precision=precision,
+                progress=progress,
+            )
+
     _say(progress, "paper: figures")
-    files = {label: ens.paths[0] for label, ens in results.items()}
+    paper_models = {label: results[label] for label, _ in models()}
+    files = {label: ens.paths[0] for label, ens in paper_models.items()}
     plot_positions(files, figures / "fig4_positions.png")
-    plot_pillar_force(results, figures / "fig5_pillar_force.png")
+    plot_pillar_force(paper_models, figures / "fig5_pillar_force.png")
     plot_friction_energy(results, figures / "fig6_friction_energy.png")
-    plot_energy_budget(results, figures / "energy_budget.png")
+    plot_energy_budget(paper_models, figures / "energy_budget.png")
     if seeds:
         plot_spread(
-            results,
+            {k: e for k, e in results.items() if len(e.seeds) > 1},
             figures / "fig_spread.png",
             single=True,
             titles=MODEL_TITLES,
@@ -192,7 +243,7 @@ def build_summary(results: dict[str, EnsembleResult], scene, until, arch, precis
             failure=ens.failure,
         )
         entry = {"paper": PAPER_FINDINGS.get(label, ""), "single": single}
-        if seeds:
+        if seeds and len(ens.seeds) > 1:
             spread = dataclasses.replace(
                 ens, seeds=ens.seeds[1:], series=ens.series[1:], metrics=ens.metrics[1:]
             )
@@ -205,11 +256,22 @@ def build_summary(results: dict[str, EnsembleResult], scene, until, arch, precis
         out["models"][label] = entry
     if seeds:
         out["findings"] = findings(results)
+        # Which findings survive which choice: each variant in the role of rate-and-state.
+        out["findings_by_choice"] = {
+            label: findings(results, rs=label)
+            for label, ens in results.items()
+            if label not in ("mu0.1", "mu0.5", "mu0.9") and len(ens.seeds) > 1
+        }
     return out
 
 
-def findings(results: dict[str, EnsembleResult]) -> list[dict]:
-    """The paper's claims tested seed by seed (the same layouts run under every model)."""
+def findings(results: dict[str, EnsembleResult], rs: str = "rate-state") -> list[dict]:
+    """The paper's claims tested seed by seed (the same layouts run under every model), with
+    the model labelled ``rs`` (a variant's label) in the role of rate-and-state."""
+    if rs != "rate-state":
+        results = {k: e for k, e in results.items() if k != "rate-state"}
+        if rs in results:
+            results["rate-state"] = results[rs]
 
     def v(label, name):
         return results[label].values(name)[1:] if label in results else np.array([])
@@ -306,15 +368,16 @@ def summary_markdown(summary: dict) -> str:
         "",
         "## The single runs (the scene's own layout)",
         "",
-        "| model | peak force (kN) | mean force (kN) | friction energy (J) | largest 1-s share "
-        "| budget residual | steps | dt (s) | wall time (s) | status |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| model | peak force (kN) | mean force (kN) | friction energy (J) | crushing energy (J) "
+        "| largest 1-s share | budget residual | steps | dt (s) | wall time (s) | status |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for label, entry in summary["models"].items():
         s = entry["single"]
         lines.append(
             f"| {label} | {s['peak_force'] / 1e3:.3g} | {s['mean_force'] / 1e3:.3g} | "
-            f"{s['friction_energy']:.4g} | {s['concentration']:.2f} | "
+            f"{s['friction_energy']:.4g} | {s.get('crushing_energy', 0.0):.4g} | "
+            f"{s['concentration']:.2f} | "
             f"{s['residual']:.3g} J ({100 * s['residual_rel']:.2g} %) | {s['steps']} | "
             f"{s['dt']:.3g} | {s['wall_time']:.0f} | {s['status']} |"
         )
@@ -333,7 +396,9 @@ def summary_markdown(summary: dict) -> str:
             "|---|---:|---:|---:|---:|",
         ]
         for label, entry in summary["models"].items():
-            sp = entry["spread"]
+            sp = entry.get("spread")
+            if not sp:
+                continue
             worst = max((abs(x) for x in entry["seeds"]["residual_rel"]), default=math.nan)
             lines.append(
                 f"| {label} | {_q(sp['peak_force'], 1e-3)} | {_q(sp['friction_energy'])} | "
@@ -350,9 +415,30 @@ def summary_markdown(summary: dict) -> str:
                 f"- **{f['claim']}** ({f['measure']}): {verdict} in {f['holds_in']} of "
                 f"{f['of']} {f['unit']}.{extra}"
             )
+    by_choice = summary.get("findings_by_choice") or {}
+    if by_choice:
+        choices = list(by_choice)
+        lines += [
+            "",
+            "## Which findings survive which choice",
+            "",
+            "Each rate-and-state claim with the model of the column in the role of "
+            "rate-and-state: layouts (or pairs) where it holds, of those compared.",
+            "",
+            "| claim | " + " | ".join(choices) + " |",
+            "|---|" + "---:|" * len(choices),
+        ]
+        claims = [f["claim"] for f in by_choice[choices[0]] if "rate-and-state" in f["claim"]]
+        for claim in claims:
+            cells = []
+            for c in choices:
+                f = next((f for f in by_choice[c] if f["claim"] == claim), None)
+                cells.append(f"{f['holds_in']}/{f['of']}" if f else "-")
+            lines.append(f"| {claim} | " + " | ".join(cells) + " |")
     lines += ["", "## What the paper reports", ""]
     for label, entry in summary["models"].items():
-        lines.append(f"- {label}: {entry['paper']}")
+        if entry["paper"]:
+            lines.append(f"- {label}: {entry['paper']}")
     return "\n".join(lines) + "\n"
 
 
@@ -449,20 +535,23 @@ def plot_friction_energy(results: dict[str, EnsembleResult], path: Path) -> Path
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for label, ens in results.items():
         colour = MODEL_COLOURS.get(label)
-        for s in ens.series[1:]:
-            ax.plot(s["time"], s["friction_energy"], lw=0.4, alpha=0.35, color=colour)
+        paper_model = label in PAPER_FINDINGS
+        if paper_model:  # the other layouts of the paper's models only, to stay readable
+            for s in ens.series[1:]:
+                ax.plot(s["time"], s["friction_energy"], lw=0.4, alpha=0.35, color=colour)
         s = ens.series[0]
         ax.plot(
             s["time"],
             s["friction_energy"],
-            lw=2,
+            "-" if paper_model else "--",
+            lw=2 if paper_model else 1.2,
             color=colour,
             label=MODEL_TITLES.get(label, label),
         )
     ax.set_yscale("symlog", linthresh=1.0)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("cumulative frictional energy (J)")
-    n = len(next(iter(results.values())).series) - 1
+    n = max(len(e.series) for e in results.values()) - 1
     ax.set_title(
         "Frictional energy dissipation" + (f" (thin: {n} other layouts)" if n else ""), fontsize=10
     )
@@ -482,7 +571,10 @@ def plot_energy_budget(results: dict[str, EnsembleResult], path: Path) -> Path:
     for ax, (label, ens) in zip(axes.flat, results.items()):
         s = ens.series[0]
         for name in terms:
-            ax.plot(s["time"], s[name], lw=1, label=name.replace("_energy", "").replace("_", " "))
+            if name in s and (name != "crushing_energy" or np.any(s[name])):
+                ax.plot(
+                    s["time"], s[name], lw=1, label=name.replace("_energy", "").replace("_", " ")
+                )
         ax.set_title(MODEL_TITLES.get(label, label), fontsize=10)
         ax.set_xlabel("time (s)")
         ax.set_ylabel("energy (J)")

@@ -94,7 +94,8 @@ def plot_run(
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for name in ("work_in", *HELD, *DISSIPATED):
-        ax.plot(t, s[name], label=name.replace("_", " "))
+        if name in s and (name != "crushing_energy" or np.any(s[name])):  # crushing: if any
+            ax.plot(t, s[name], label=name.replace("_", " "))
     ax.plot(t, residual(s), "k--", label="residual")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("energy (J)")

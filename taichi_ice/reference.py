@@ -8,10 +8,12 @@ a time, in float64, from the same equations:
   overlap of the two outlines (``geometry.overlap``: area ``A``, contact point, normal from
   ``i`` into ``j``, width ``L``); the velocity of ``j`` relative to ``i`` at the contact
   point, split into the approach speed ``v_n`` and the slip ``v_t``; the normal force
-  ``F_n = max(k_e A + k_v L v_n, 0)``; the tangential stick spring ``k_t`` and dashpot
-  ``c_t`` on the stretch ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979); ``mu`` from
-  Coulomb, or rate-and-state with ``theta`` started in equilibrium at the first slip rate;
-  the stored elastic energy grows by the elastic force's work on the approach.
+  ``F_n = max(k_e (A - A_c) + k_v L v_n, 0)``, with ``A_c`` the crushed area when the ice
+  has a strength (``contact.crush``); the tangential stick spring ``k_t = ratio k_e L`` and
+  dashpot ``c_t = ratio k_v L`` on the stretch ``xi``, capped at ``mu F_n`` (Cundall and
+  Strack 1979); ``mu`` from Coulomb, or from the rate-and-state row of the world through
+  ``slip.contact_friction`` (the sliding rate solved in the step, the rule below v_star);
+  the stored elastic energy grows by the elastic forces' work.
 - :func:`reference_step`: every owned pair of every world, forces gathered in the same
   fixed point as the kernels (``state.FORCE_QUANTUM``, truncated toward zero), then
   semi-implicit Euler with water drag (``drag.water_drag``) and external forces; fixed
@@ -36,17 +38,11 @@ import numpy as np
 
 from .assemble import Batch, assemble
 from .codes import BodyEnergy, BodyKind, EnergyTerm, ThetaMethod
-from .contact import normal_force, tangential_force
+from .contact import crush, normal_force, tangential_force
 from .drag import water_drag
-from .friction import (
-    RateState,
-    method_code,
-    rate_state_mu,
-    slip_log,
-    theta_equilibrium,
-    theta_step,
-)
+from .friction import method_code
 from .geometry import overlap
+from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction
 from .state import FORCE_QUANTUM
 
 __all__ = [
@@ -74,14 +70,17 @@ class ContactMemory:
     Attributes:
         xi: tangential spring stretch along the tangent (m).
         area: overlap area at the last step (m^2).
-        elastic: normal elastic energy stored in the overlap (J).
-        theta: rate-and-state variable (0 for Coulomb).
+        elastic: elastic energy stored in the contact (J), normal and tangential.
+        theta: rate-and-state variable; ``slip.NO_INTERFACE`` when the contact has no
+            sliding interface (and for Coulomb).
+        crushed: overlap area crushed so far (m^2).
     """
 
     xi: float = 0.0
     area: float = 0.0
     elastic: float = 0.0
-    theta: float = 0.0
+    theta: float = NO_INTERFACE
+    crushed: float = 0.0
 
 
 class ContactForce(NamedTuple):
@@ -100,6 +99,8 @@ class ContactForce(NamedTuple):
         torque_owner, torque_partner: about each centroid (N m).
         memory: the contact's new memory (stretch, area, stored elastic energy, theta).
         slip_work: frictional work of the step (J). viscous_work: dashpot work (J).
+        crushing_work: work on the crushed overlap (J). sliding_rate: V of the law (m/s;
+            0 for Coulomb).
     """
 
     area: float
@@ -119,6 +120,8 @@ class ContactForce(NamedTuple):
     memory: ContactMemory
     slip_work: float
     viscous_work: float
+    crushing_work: float = 0.0
+    sliding_rate: float = 0.0
 
 
 def _cross(a, b) -> float:
@@ -143,11 +146,12 @@ def contact_force(
     dt: float,
     k_e: float,
     k_v: float,
-    k_t: float,
-    c_t: float,
+    ratio: float,
     law,
     memory: ContactMemory | None = None,
     method: int | None = None,
+    crushing_force: float | None = None,
+    tol: float = NEWTON_TOLERANCE["f64"],
 ) -> ContactForce | None:
     """NumPy reference of ``ContactStage.pair``: the contact between an owner and a partner.
 
@@ -161,10 +165,14 @@ def contact_force(
         pos_owner, vel_owner, omega_owner: centroid (m) in that frame, velocity (m/s), spin
             (rad/s).
         pos_partner, vel_partner, omega_partner: likewise for the partner.
-        dt: time step (s). k_e: N/m^2. k_v: Pa s. k_t: N/m. c_t: N s/m.
-        law: the world's friction law.
+        dt: time step (s). k_e: N/m^2. k_v: Pa s.
+        ratio: ``k_t / (k_e L)`` and ``c_t / (k_v L)`` (``[ice] tangential_stiffness``).
+        law: the world's friction: a Coulomb mu (float), or a law whose ``contact_row`` the
+            rate-and-state contact runs (any law: Coulomb is A = B = 0).
         memory: the contact's memory from the last step, or None for a new contact.
         method: ``codes.ThetaMethod`` for theta; default the law's own method.
+        crushing_force: strength x thickness (N/m), or None for no strength.
+        tol: Newton's tolerance of the sliding rate (``slip.NEWTON_TOLERANCE``).
 
     Returns:
         A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
@@ -182,24 +190,48 @@ def contact_force(
     tangent = np.array([-normal[1], normal[0]])
     approach = -float(v_rel @ normal)
     slip = float(v_rel @ tangent)
-    f_n, f_el = normal_force(area, width, approach, k_e, k_v)
-
     old = memory if memory is not None else ContactMemory()
-    theta_new = 0.0
-    if isinstance(law, RateState):
-        a_, b_, mu0, v_star, t_c = law.params
-        code = method_code(law.method) if method is None else method
-        x = float(slip_log(abs(slip), v_star))
-        theta = old.theta if memory is not None else float(theta_equilibrium(x, b_))
-        mu = float(rate_state_mu(theta, x, a_, mu0))
-        theta_new = float(theta_step(theta, x, x, x, dt, b_, t_c, code))
+    cap_n, crushed = math.inf, old.crushed
+    if crushing_force is not None:
+        cap_n, crushed = crush(area, old.crushed, width, k_e, crushing_force)
+    f_n, f_el = normal_force(max(area - crushed, 0.0), width, approach, k_e, k_v)
+    crushing_work = 0.0
+    if crushing_force is not None:
+        f_n = min(f_n, cap_n)
+        if crushed > old.crushed and width > 0.0:
+            crushing_work = cap_n * (crushed - old.crushed) / width
+
+    k_t, c_t = ratio * k_e * width, ratio * k_v * width
+    theta_new, v = NO_INTERFACE, 0.0
+    if isinstance(law, (int, float)):
+        mu, theta_new = float(law), 0.0  # no theta is kept
     else:
-        mu = float(law.mu)
+        row = law.contact_row()
+        code = method_code(getattr(law, "method", "exponential")) if method is None else method
+        f_trial = abs(k_t * (old.xi + slip * dt) + c_t * slip)
+        mu, theta_new, v = contact_friction(
+            old.theta,
+            f_trial,
+            f_n,
+            k_t * dt + c_t,
+            dt,
+            row["A"],
+            row["B"],
+            row["mu0"],
+            row["v_star"],
+            row["t_c"],
+            row["memory"],
+            row["rest_rule"],
+            code,
+            tol,
+        )
 
     f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
     force = f_n * normal + f_t * tangent
-    # Elastic energy stored in the contact: the work of its elastic force on the approach.
-    elastic = old.elastic + f_el * approach * dt
+    # Elastic energy stored in the contact: the work of its elastic forces (normal on the
+    # approach, less what crushed; tangential at this step's stiffness).
+    elastic = old.elastic + f_el * approach * dt - crushing_work
+    elastic += 0.5 * k_t * (xi_new * xi_new - old.xi * old.xi)
     viscous = (f_n - f_el) * approach * dt + damp_work
     return ContactForce(
         area=area,
@@ -216,15 +248,29 @@ def contact_force(
         force=force,
         torque_owner=-_cross(r_i, force),
         torque_partner=_cross(r_j, force),
-        memory=ContactMemory(xi=xi_new, area=area, elastic=elastic, theta=theta_new),
+        memory=ContactMemory(
+            xi=xi_new, area=area, elastic=elastic, theta=theta_new, crushed=crushed
+        ),
         slip_work=slip_work,
         viscous_work=viscous,
+        crushing_work=crushing_work,
+        sliding_rate=v,
     )
 
 
 # --------------------------------------------------------------------------------------------
 # A whole step
 # --------------------------------------------------------------------------------------------
+
+
+_ROW_KEYS = ("A", "B", "mu0", "v_star", "t_c", "memory", "rest_rule")
+
+
+class _Row(dict):
+    """A world's rate-and-state model columns, read back as ``contact_row`` gives them."""
+
+    def contact_row(self) -> dict:
+        return self
 
 
 @dataclass(frozen=True)
@@ -236,10 +282,12 @@ class ReferenceModel:
         mass: ``(N,)`` kg. inertia: ``(N,)`` kg m^2. vertices: N outlines ``(n, 2)``
             relative to the centroid, unrotated (m). force_ext: ``(N, 2)`` N.
         drag: ``(N, 2)`` water drag coefficients (kg/m, kg m^2), or None with no water.
-        laws: the friction law of each world, rebuilt from its model columns.
-        k_e (N/m^2), k_v (Pa s): normal contact parameters. k_t (N/m), c_t (N s/m): ``(W,)``
-            tangential spring and dashpot of each world.
+        laws: the friction of each world, rebuilt from its model columns: a Coulomb mu
+            (float) when every world is Coulomb, else a world's rate-and-state columns.
+        k_e (N/m^2), k_v (Pa s): normal contact parameters. ratio: tangential to normal.
         method: ``codes.ThetaMethod`` for theta (one per batch).
+        crushing_force: strength x thickness (N/m), or None.
+        tol: Newton's tolerance of the sliding rate.
         quantum: force resolution of the gather (N); None sums in floating point.
     """
 
@@ -253,10 +301,11 @@ class ReferenceModel:
     laws: tuple
     k_e: float
     k_v: float
-    k_t: np.ndarray
-    c_t: np.ndarray
+    ratio: float
     method: int = ThetaMethod.EXPONENTIAL
     quantum: float | None = FORCE_QUANTUM
+    crushing_force: float | None = None
+    tol: float = NEWTON_TOLERANCE["f64"]
 
     @property
     def n_bodies(self) -> int:
@@ -267,15 +316,13 @@ class ReferenceModel:
         """The model of the batch a ``World`` uploads: the same arrays, nothing re-derived."""
         host, layout = batch.host, batch.layout
         start, count = host.body_vert_start, host.body_vert_count
-        law_class = type(batch.scenes[0].friction)
-        extra = {"method": ThetaMethod(layout.theta_method).label} if layout.rate_state else {}
-        laws = tuple(
-            law_class(
-                **{p.name: float(host[f"world_{p.name}"][w]) for p in law_class.parameters()},
-                **extra,
+        if layout.coulomb:
+            laws = tuple(float(mu) for mu in host.world_mu)
+        else:
+            laws = tuple(
+                _Row({k: host[f"world_{k}"][w].item() for k in _ROW_KEYS})
+                for w in range(layout.n_worlds)
             )
-            for w in range(layout.n_worlds)
-        )
         return cls(
             kind=host.body_kind,
             world=host.body_world,
@@ -289,10 +336,11 @@ class ReferenceModel:
             laws=laws,
             k_e=layout.contact_stiffness,
             k_v=layout.contact_viscosity,
-            k_t=host.world_k_t,
-            c_t=host.world_c_t,
+            ratio=layout.tangential_stiffness,
             method=layout.theta_method,
             quantum=quantum,
+            crushing_force=layout.crushing_force if layout.crushing else None,
+            tol=NEWTON_TOLERANCE[layout.precision],
         )
 
     @classmethod
@@ -308,7 +356,7 @@ class ReferenceState:
     Attributes:
         pos: ``(N, 2)`` m. angle: ``(N,)`` rad. vel: ``(N, 2)`` m/s. omega: ``(N,)`` rad/s.
         contacts: ``{(owner, partner): ContactMemory}`` of the contacts of the last step.
-        body_energy: ``(N, 4)`` cumulative terms per body (J), ``codes.BodyEnergy`` columns.
+        body_energy: ``(N, 5)`` cumulative terms per body (J), ``codes.BodyEnergy`` columns.
         time: s.
     """
 
@@ -414,11 +462,12 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 dt=dt,
                 k_e=model.k_e,
                 k_v=model.k_v,
-                k_t=float(model.k_t[model.world[i]]),
-                c_t=float(model.c_t[model.world[i]]),
+                ratio=model.ratio,
                 law=model.laws[model.world[i]],
                 memory=state.contacts.get((i, j)),
                 method=model.method,
+                crushing_force=model.crushing_force,
+                tol=model.tol,
             )
             if c is None:
                 continue  # no overlap: the pair's memory is dropped
@@ -426,6 +475,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             gather(i, -c.force, c.torque_owner)
             new.body_energy[i, BodyEnergy.FRICTION] += c.slip_work
             new.body_energy[i, BodyEnergy.VISCOUS] += c.viscous_work
+            new.body_energy[i, BodyEnergy.CRUSHING] += c.crushing_work
             contacts[(i, j)] = c.memory
     new.contacts = contacts
 
@@ -477,7 +527,7 @@ def reference_energies(state: ReferenceState, model: ReferenceModel) -> np.ndarr
         out[w, EnergyTerm.VISCOUS] += state.body_energy[i, BodyEnergy.VISCOUS]
         out[w, EnergyTerm.DRAG] += state.body_energy[i, BodyEnergy.DRAG]
         out[w, EnergyTerm.WORK_IN] += state.body_energy[i, BodyEnergy.WORK]
+        out[w, EnergyTerm.CRUSHING] += state.body_energy[i, BodyEnergy.CRUSHING]
     for (i, _j), mem in state.contacts.items():
-        w = model.world[i]
-        out[w, EnergyTerm.ELASTIC] += mem.elastic + 0.5 * model.k_t[w] * mem.xi**2
+        out[model.world[i], EnergyTerm.ELASTIC] += mem.elastic
     return out

@@ -94,6 +94,7 @@ _ICE_KEYS = (
     "contact_stiffness",
     "contact_viscosity",
     "tangential_stiffness",
+    "crushing_strength",
 )
 _WATER_KEYS = ("density", "form_drag", "skin_drag")
 _BODY_KEYS = (
@@ -326,6 +327,7 @@ def _parse_ice(source: str, data: Any) -> IceProperties:
         tangential_stiffness=t.number(
             "tangential_stiffness", d.tangential_stiffness, positive=True
         ),
+        crushing_strength=t.number("crushing_strength", None, positive=True, unit=" Pa"),
     )
 
 

@@ -84,8 +84,13 @@ class IceProperties:
         thickness: floe thickness, m.
         contact_stiffness: ``k_e``, N/m per m of contact width.
         contact_viscosity: ``k_v``, Pa s per m of contact width.
-        tangential_stiffness: ratio ``k_t / k_e`` of the tangential stick spring to the normal
-            contact stiffness, dimensionless.
+        tangential_stiffness: ratio ``k_t / k_e`` (and ``c_t / k_v``) of the tangential stick
+            spring (and dashpot) to the normal ones, dimensionless; a contact of width L has
+            ``k_t = ratio k_e L``.
+        crushing_strength: the ice's strength (Pa), or None (default: no limit). A contact's
+            normal elastic force is capped at strength x thickness x contact width; overlap
+            beyond the cap is crushed, not recovered, and its work is the budget's
+            ``crushing`` term.
     """
 
     density: float = 920.0
@@ -93,6 +98,7 @@ class IceProperties:
     contact_stiffness: float = 9.75e7
     contact_viscosity: float = 3.16e4
     tangential_stiffness: float = 0.5
+    crushing_strength: float | None = None
 
 
 @dataclass(frozen=True)

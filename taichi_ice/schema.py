@@ -139,6 +139,27 @@ def _law_params():
             init=HOST,
         )
         for p in RateState.parameters()
+    ] + [
+        Var(
+            "world_memory",
+            "i32",
+            ("n_worlds",),
+            "",
+            "rate-and-state: 1 if contacts carry theta, 0 (steady-state law, Coulomb) if not",
+            role="cold",
+            when="rate_state",
+            init=HOST,
+        ),
+        Var(
+            "world_rest_rule",
+            "i32",
+            ("n_worlds",),
+            "code",
+            "rate-and-state: codes.RestRule, the memory below v_star",
+            role="cold",
+            when="rate_state",
+            init=HOST,
+        ),
     ]
     return coulomb + rate_state
 
@@ -161,8 +182,6 @@ MODEL: tuple[Var, ...] = (
     Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation", when="water", init=HOST),
     Var("body_probe", "i32", ("n_bodies",), "id", "probe index of the body, -1 if none", init=HOST),
     Var("vert_local", "real", ("n_verts",), "m", "outline relative to the centroid, unrotated", lanes=2, init=HOST),
-    Var("world_k_t", "real", ("n_worlds",), "N/m", "tangential stick spring", role="cold", init=HOST),
-    Var("world_c_t", "real", ("n_worlds",), "N s/m", "tangential dashpot", role="cold", init=HOST),
     Var("world_body_start", "i32", ("world_edges",), "id", "first body of each world (bodies are world-major)", role="cold", init=HOST),
     Var("large_ids", "i32", ("n_large",), "id", "large bodies, world by world", role="cold", init=HOST),
     Var("world_large_start", "i32", ("world_edges",), "id", "first large body of each world in large_ids", role="cold", init=HOST),
@@ -181,8 +200,9 @@ DATA: tuple[Var, ...] = (
     Var("contact_count", "i32", ("buffers", "n_bodies"), "", "used slots of each body"),
     Var("contact_xi", "real", ("buffers", "n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
     Var("contact_area", "real", ("buffers", "n_bodies", "slots"), "m^2", "overlap area of the contact this step", role="diagnostic"),
-    Var("contact_elastic", "real", ("buffers", "n_bodies", "slots"), "J", "normal elastic energy stored in the contact", role="diagnostic"),
-    Var("contact_theta", "real", ("buffers", "n_bodies", "slots"), "", "rate-and-state variable theta", when="rate_state"),
+    Var("contact_elastic", "real", ("buffers", "n_bodies", "slots"), "J", "elastic energy stored in the contact: work of its normal and tangential springs", role="diagnostic"),
+    Var("contact_theta", "real", ("buffers", "n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
+    Var("contact_crushed", "real", ("buffers", "n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
     Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic"),
     Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
     Var("status", "i32", ("status_len",), "code", "overflow and divergence flags, codes.Status entries", role="cold"),
@@ -241,11 +261,18 @@ class Layout:
             (see the module table).
         max_verts: most vertices of any body (the kernels' local outline matrices).
         cell_size: edge of a hash cell (m), the diameter of the largest small body.
-        coulomb, rate_state: which friction laws the batch's worlds use.
+        coulomb, rate_state: the batch's friction: every world Coulomb (``world_mu``), or
+            rate-and-state columns for every world (``friction.contact_row``: the
+            rate-and-state laws, and Coulomb worlds as A = B = 0).
         water: water drag is compiled in.
         theta_method: ``codes.ThetaMethod`` of the state variable (one per batch).
         contact_stiffness: ``k_e``, N/m per m of contact width (shared by the batch).
         contact_viscosity: ``k_v``, Pa s per m of contact width.
+        tangential_stiffness: ratio of the tangential stick spring and dashpot to the normal
+            ones; a contact of width L has ``k_t = ratio k_e L``, ``c_t = ratio k_v L``.
+        crushing: the ice's strength caps the normal force (``[ice] crushing_strength``).
+        crushing_force: strength x thickness (N per m of contact width): the cap is this
+            times the contact width.
         runaway_speed: a dynamic body faster than this (m/s) flags the run as diverged.
         precision: ``"f64"`` or ``"f32"``, the type of every ``real`` field.
     """
@@ -266,6 +293,9 @@ class Layout:
     theta_method: int
     contact_stiffness: float
     contact_viscosity: float
+    tangential_stiffness: float
+    crushing: bool
+    crushing_force: float
     runaway_speed: float
     precision: str = "f64"
 

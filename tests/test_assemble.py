@@ -1,8 +1,8 @@
 """Batch assembly (taichi_ice.assemble) and the energy budget (taichi_ice.budget), no kernels.
 
 - A batch refuses worlds that disagree on what one set of kernels compiles in (ice, water,
-  kind of law, the state integrator: a batch mixing integrators once ran every world with the
-  first world's), naming the world and what differs.
+  the state integrator: a batch mixing integrators once ran every world with the first
+  world's), naming the world and what differs; the laws themselves may mix.
 - Per-world parameters are the world's own: a world's columns are the same alone and in any
   batch (which is why a batched world equals the world alone).
 - The budget's residual and breach test against hand-made terms.
@@ -17,9 +17,9 @@ import pytest
 
 from taichi_ice import budget
 from taichi_ice.assemble import MAX_VERTS_LIMIT, assemble
-from taichi_ice.codes import EnergyTerm
+from taichi_ice.codes import EnergyTerm, RestRule
 from taichi_ice.errors import ScenarioError
-from taichi_ice.friction import Coulomb, RateState
+from taichi_ice.friction import Coulomb, MemoryOnly, RateState, SteadyState
 from taichi_ice.scenario import load_scenario, scene_from_dict
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -30,18 +30,37 @@ def pushed():
     return load_scenario(ROOT / "scenarios" / "pushed_field.toml")
 
 
-@pytest.mark.parametrize(
-    ("other", "message"),
-    [
-        (lambda s: s.with_friction(RateState(method="rk4")), "integrator"),
-        (lambda s: s.with_friction(Coulomb(0.3)), "kind of friction law"),
-    ],
-)
-def test_worlds_that_cannot_share_kernels_are_refused(pushed, other, message):
-    """Mixing the state integrator or the kind of law is an error naming world 1."""
+def test_worlds_that_cannot_share_kernels_are_refused(pushed):
+    """Mixing the state integrator is an error naming the world (Coulomb has none)."""
     base = pushed.with_friction(RateState())
-    with pytest.raises(ValueError, match=f"world 1 .*{message}"):
-        assemble([base, other(base)])
+    other = [base.with_friction(Coulomb(0.3)), base.with_friction(RateState(method="rk4"))]
+    with pytest.raises(ValueError, match=r"world 2 .*integrator"):
+        assemble([base, *other])
+
+
+def test_laws_mix_in_one_batch_each_with_its_own_row(pushed):
+    """Coulomb, rate-and-state and its variants share a batch; each world's columns are its
+    law's: Coulomb as A = B = 0 with mu0 = mu and no memory, the steady-state law without
+    memory, memory-only with B = A, the rest rule as its code."""
+    laws = [
+        Coulomb(0.3),
+        RateState(below_v_star="healing"),
+        SteadyState(B=0.2),
+        MemoryOnly(A=0.07),
+    ]
+    host = assemble([pushed.with_friction(law) for law in laws]).host
+    assert host["world_mu0"].tolist() == [0.3, 0.872, 0.872, 0.872]
+    assert host["world_A"].tolist() == [0.0, 0.05, 0.05, 0.07]
+    assert host["world_B"].tolist() == [0.0, 0.112, 0.2, 0.07]
+    assert host["world_memory"].tolist() == [0, 1, 0, 1]
+    assert host["world_rest_rule"].tolist() == [
+        RestRule.PAPER,
+        RestRule.HEALING,
+        RestRule.PAPER,
+        RestRule.PAPER,
+    ]
+    only_coulomb = assemble([pushed.with_friction(Coulomb(0.3))])
+    assert only_coulomb.layout.coulomb and "world_A" not in only_coulomb.host
 
 
 def test_worlds_with_other_ice_are_refused(pushed):
@@ -53,12 +72,12 @@ def test_worlds_with_other_ice_are_refused(pushed):
 
 
 def test_a_world_has_the_same_columns_alone_and_in_a_batch(pushed):
-    """Law parameters and the tangential spring of a world do not depend on its batch."""
+    """The law columns of a world do not depend on its batch."""
     a = pushed.with_friction(RateState(t_c=2.0))
     b = pushed.reseeded(7).with_friction(RateState(B=0.2))
     alone = assemble([b]).host
     batch = assemble([a, b]).host
-    for name in ("world_B", "world_t_c", "world_k_t", "world_c_t"):
+    for name in ("world_B", "world_t_c", "world_memory", "world_rest_rule"):
         assert batch[name][1] == alone[name][0], name
     assert batch["world_t_c"].tolist() == [2.0, 3.0]
     start = batch["world_body_start"]

@@ -73,6 +73,7 @@ def test_defaults_are_the_papers():
         "v_star": 1e-5,
         "t_c": 3.0,
         "method": "exponential",
+        "below_v_star": "paper",
     }
     assert Coulomb().mu == 0.5 and Coulomb(0.3).to_dict() == {"law": "coulomb", "mu": 0.3}
     assert RateState(t_c=2.0, method="rk4").params[4] == 2.0
@@ -208,23 +209,52 @@ def test_convergence_orders(profile, expected):
 
 
 def test_below_v_star_mu_is_mu0():
-    """An interface that starts and stays below V* has theta = 0 and mu = mu0 exactly."""
+    """An interface that starts and stays below V* has mu = mu0 exactly under every rule:
+    no interface (theta NaN) under the paper's, theta = 0 under healing and frozen."""
     rng = np.random.default_rng(3)
     t = np.cumsum(rng.uniform(0.01, 1.0, 200))
     v = rng.uniform(0.0, V_STAR, 200)
     for method in ALL_METHODS:
         mu, theta = LAW.respond(t, v, method=method, return_theta=True)
-        assert np.all(mu == MU0) and np.all(theta == 0.0)
+        assert np.all(mu == MU0) and np.all(np.isnan(theta))
+        for rule in ("healing", "frozen"):
+            law = RateState(below_v_star=rule)
+            mu, theta = law.respond(t, v, method=method, return_theta=True)
+            assert np.all(mu == MU0) and np.all(theta == 0.0)
+
+
+def test_slide_stop_slide_under_each_rule():
+    """Slide at 1 mm/s, stop (below V*) for 5 s, slide again: the paper's rule gives mu0 while
+    stopped and mu_ss again at once (a new interface); frozen holds mu_ss while stopped and
+    resumes where it was; healing weakens to mu0 + theta at the stop and heals with t_c,
+    then the direct effect A x on top of the healed state at the restart."""
+    t = np.linspace(0.0, 30.0, 30001)
+    v = np.where((t > 10.0) & (t < 15.0), 0.0, 1e-3)
+    x = math.log(1e-3 / V_STAR)
+    mu_ss = MU0 + (A - B) * x
+    stopped, again = (t > 10.5) & (t < 14.9), np.searchsorted(t, 15.0)
+    paper = RateState().respond(t, v)
+    assert np.all(paper[stopped] == MU0) and paper[again] == pytest.approx(mu_ss, abs=1e-12)
+    frozen = RateState(below_v_star="frozen").respond(t, v)
+    assert np.allclose(frozen[stopped], MU0 - B * x, atol=1e-12)  # theta held, no A x
+    assert frozen[again] == pytest.approx(mu_ss, abs=1e-3)  # the same interface resumes
+    healing = RateState(below_v_star="healing").respond(t, v)
+    theta_stop = -B * x
+    expected = MU0 + theta_stop * np.exp(-(t[stopped] - 10.0) / T_C)
+    assert np.allclose(healing[stopped], expected, atol=2e-3)  # decays from the stop
+    peak = MU0 + theta_stop * math.exp(-5.0 / T_C) + A * x
+    assert healing[again] == pytest.approx(peak, abs=2e-3)  # the aging law's peak
 
 
 def test_after_slowing_below_v_star_theta_relaxes_to_zero():
-    """Slide at 1 mm/s, stop below V*: theta decays to 0 with t_c, mu returns to mu0 without
-    a jump at the crossing (the same convention as the exact piecewise-linear solution)."""
+    """Healing: slide at 1 mm/s, stop below V*: theta decays to 0 with t_c, mu returns to
+    mu0 without a jump at the crossing (the exact piecewise-linear solution's convention)."""
     knots_t, knots_v = [0.0, 10.0, 13.0, 60.0], [1e-3, 1e-3, 1e-7, 1e-7]
     t = np.linspace(0.0, 60.0, 6001)
     v = np.interp(t, knots_t, knots_v)
-    mu, theta = LAW.respond(t, v, return_theta=True)
-    ref_mu = exact.piecewise_linear(knots_t, knots_v, t, LAW)
+    law = RateState(below_v_star="healing")  # the rule exact.piecewise_linear solves
+    mu, theta = law.respond(t, v, return_theta=True)
+    ref_mu = exact.piecewise_linear(knots_t, knots_v, t, law)
     assert np.max(np.abs(mu - ref_mu)) < CROSSING_TOL
     below = t > 13.0
     assert np.allclose(mu[below], MU0 + theta[below], rtol=0, atol=1e-15)
@@ -392,7 +422,7 @@ def test_taichi_batch_matches_numpy(method, taichi_runtime):
     assert np.max(np.abs(mu - mu_np)) < AGREE_F64
     assert np.max(np.abs(theta - theta_np)) < AGREE_F64
     for i in (0, 17, 47):
-        law = RateState(*params[i])
+        law = RateState(*params[i], below_v_star="healing")  # the batch's reading
         assert np.max(np.abs(law.respond(t, v[i], method=method) - mu[i])) < AGREE_F64
     assert np.any(mu == 0.0) and np.any(mu == params[:, 2:3])  # clamp and below-V* exercised
 
@@ -403,7 +433,8 @@ def test_batch_broadcasts_one_history_or_one_law(taichi_runtime):
     shared_v = respond_batch_ti(t, v[0], params)
     assert shared_v.shape == (6, 40)
     for i in range(6):
-        assert np.allclose(shared_v[i], RateState(*params[i]).respond(t, v[0]), atol=1e-12)
+        law = RateState(*params[i], below_v_star="healing")
+        assert np.allclose(shared_v[i], law.respond(t, v[0]), atol=1e-12)
     shared_law = respond_batch_ti(t, v, LAW)
     assert np.allclose(shared_law, respond_batch(t, v, LAW), atol=1e-12)
 

@@ -24,6 +24,7 @@ SERIES = {
     "drag_energy",
     "kinetic_energy",
     "elastic_energy",
+    "crushing_energy",
     "work_in",
     "n_contacts",
 }

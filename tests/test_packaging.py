@@ -291,6 +291,7 @@ def test_wheel_runs_paper_anywhere(wheel: Path, tmp_path: Path) -> None:
 
     paper = tmp_path / "paper"
     args = ["paper", "--out", str(paper), "--until", "0.2", "--seeds", "0", "--quick"]
+    args.append("--paper-only")
     run = subprocess.run(
         [sys.executable, "-m", "taichi_ice", *args],
         cwd=elsewhere,

@@ -158,7 +158,8 @@ def test_batched_layouts_equal_each_layout_alone(pillar, run_opts):
 
 
 def test_paper_command_writes_every_file(tmp_path, taichi_runtime, capsys):
-    """`taichi-ice paper` on a 0.3 s span with two extra layouts: runs, figures, summaries."""
+    """`taichi-ice paper` on a 0.3 s span with two extra layouts: runs, figures, summaries;
+    the variants run over the same layouts, the strength runs on the scene's layout."""
     arch, precision = taichi_runtime
     out = tmp_path / "paper"
     argv = ["paper", "--out", str(out), "--until", "0.3", "--seeds", "2", "--quick"]
@@ -181,8 +182,14 @@ def test_paper_command_writes_every_file(tmp_path, taichi_runtime, capsys):
         path = out / "figures" / f"{name}.png"
         assert path.stat().st_size > 10_000, name
     summary = json.loads((out / "summary.json").read_text())
-    assert set(summary["models"]) == set(labels)
-    for label in labels:
+    variants = ("rate-state_healing", "steady-state", "memory-only")
+    strengths = ("rate-state_strength1MPa", "rate-state_strength3MPa")
+    assert set(summary["models"]) == {*labels, *variants, *strengths}
+    for label in strengths:
+        assert "spread" not in summary["models"][label]
+        assert summary["models"][label]["single"]["crushing_energy"] >= 0.0
+    assert set(summary["findings_by_choice"]) == {"rate-state", *variants}
+    for label in (*labels, *variants):
         single = summary["models"][label]["single"]
         for key in (
             "peak_force",
@@ -200,6 +207,7 @@ def test_paper_command_writes_every_file(tmp_path, taichi_runtime, capsys):
         assert 0 <= f["holds_in"] <= f["of"] <= 4, f
     text = (out / "summary.md").read_text()
     assert "| mu0.9 |" in text and "rate-state" in text and "findings" in text
+    assert "Which findings survive which choice" in text
 
 
 def test_paper_command_refuses_negative_seeds(capsys):

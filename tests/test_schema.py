@@ -105,15 +105,15 @@ def test_docs_state_table_is_generated_from_the_schema():
 
 def test_traffic_model_counts_the_integrator_by_hand():
     """integrator.advance moves, per body and f64: reads 8 scalars, 4 vectors, the i64 force
-    and torque, 4 energy terms; writes back the same minus the model, plus the status."""
+    and torque, 5 energy terms; writes back the same minus the model, plus the status."""
     batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
     layout = batch.layout.replace(n_bodies=1000, n_probes=0, water=False)
     n = layout.n_bodies
     # reads: probe, kind (i32); force_ext (2 x f64); inv_mass, inv_inertia (f64); force_q
     # (2 x i64), torque_q (i64); vel (2 x f64), omega, pos (2 x f64), angle (f64); energy
-    # (4 x f64); time_step (f64). No probes: probe_impulse moves nothing.
-    reads = n * (4 + 4 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 32) + 8
+    # (5 x f64, codes.BodyEnergy); time_step (f64). No probes: probe_impulse moves nothing.
+    reads = n * (4 + 4 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 40) + 8
     # writes: force_q, torque_q, vel, omega, pos, angle, energy; status (3 x i32).
-    writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 32) + 12
+    writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 40) + 12
     got = schema.traffic({"integrator": STAGES["integrator"]}, layout, contacts=0)
     assert got["integrator.advance"] == reads + writes

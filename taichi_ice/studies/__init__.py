@@ -2,6 +2,8 @@
 
 - ``single_interface``: the paper's Figure 3 (step, ramp, fast and slow sinusoid) against
   the exact solutions, with the sinusoids' gain and phase against H(w).
+- ``rest_rules``: mu of an interface that slides, stops and slides again under each rule
+  below v_star (``paper``, ``healing``, ``frozen``) and the variants without memory or rate.
 - ``stability``: explicit Euler and RK4 past their stability limits diverge; exponential
   and implicit stay bounded.
 - ``speed_accuracy``: error against time step and against wall time for every method, in
@@ -27,12 +29,13 @@ def validate_command(out: str, speed: bool = False, quick: bool = False) -> int:
     Returns:
         Process exit code: 0.
     """
-    from . import single_interface, stability
+    from . import rest_rules, single_interface, stability
 
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     single_interface.run(out_dir, quick=quick)
+    rest_rules.run(out_dir)
     stability.run(out_dir, quick=quick)
     if speed:
         from . import speed_accuracy

@@ -8,8 +8,8 @@ Layout (one file per world; DESIGN.md section 3):
   failed), ``steps``, ``wall_time`` (s).
 - ``/series/``: ``time`` (T,), ``probe_force`` (T, P, 2) mean contact force on each probe
   body over the sample interval (N), ``friction_energy``, ``viscous_energy``,
-  ``drag_energy``, ``kinetic_energy``, ``elastic_energy``, ``crushing_energy``, ``work_in`` (T,) in J, and
-  ``n_contacts`` (T,).
+  ``drag_energy``, ``kinetic_energy``, ``elastic_energy``, ``crushing_energy``, ``work_in``
+  (T,) in J, and ``n_contacts`` (T,).
 - ``/frames/``: ``time`` (F,), ``position`` (F, N, 2), ``angle`` (F, N), ``velocity``
   (F, N, 2), ``omega`` (F, N); every body in scene order.
 - ``/bodies/``: ``names``, ``kinds``, ``vertices`` (V, 2) centroid-relative outlines and

@@ -4,6 +4,9 @@
   the exact solutions, with the sinusoids' gain and phase against H(w).
 - ``rest_rules``: mu of an interface that slides, stops and slides again under each rule
   below v_star (``paper``, ``healing``, ``frozen``) and the variants without memory or rate.
+- ``dem_contact``: the same law through a DEM contact: Figure 3's profiles as the speed of a
+  floor under a block, against the exact solutions; and a block that slides, stops, then
+  holds or slides under a horizontal load, under each rule below v_star.
 - ``stability``: explicit Euler and RK4 past their stability limits diverge; exponential
   and implicit stay bounded.
 - ``speed_accuracy``: error against time step and against wall time for every method, in
@@ -29,13 +32,14 @@ def validate_command(out: str, speed: bool = False, quick: bool = False) -> int:
     Returns:
         Process exit code: 0.
     """
-    from . import rest_rules, single_interface, stability
+    from . import dem_contact, rest_rules, single_interface, stability
 
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     single_interface.run(out_dir, quick=quick)
     rest_rules.run(out_dir)
+    dem_contact.run(out_dir, quick=quick)
     stability.run(out_dir, quick=quick)
     if speed:
         from . import speed_accuracy

@@ -44,6 +44,8 @@ MODEL_COLOURS = {
     "rate-state_healing": "C4",
     "steady-state": "C7",
     "memory-only": "C5",
+    "rate-state_strength1MPa": "C8",
+    "rate-state_strength3MPa": "C9",
 }
 MODEL_TITLES = {
     "mu0.1": r"$\mu$ = 0.1",
@@ -53,6 +55,8 @@ MODEL_TITLES = {
     "rate-state_healing": "rate and state, healing below V*",
     "steady-state": "steady-state law (rate, no memory)",
     "memory-only": "memory only (B = A)",
+    "rate-state_strength1MPa": "rate and state, ice strength 1 MPa",
+    "rate-state_strength3MPa": "rate and state, ice strength 3 MPa",
 }
 # Ice strengths (Pa) of the extra single runs under rate-and-state (the paper gives none).
 STRENGTHS = (1e6, 3e6)

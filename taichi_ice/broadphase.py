@@ -110,3 +110,22 @@ class SpatialHash(Fields, Stage):
             if m.body_small[i]:
                 b = bucket_of(self.body_cell[i], m.body_world[i], self.mask)
                 self.sorted_ids[self.bucket_start[b] + ti.atomic_add(self.bucket_fill[b], 1)] = i
+
+
+class NeighbourList(Fields):
+    """Each body's candidate partners, found with a margin (the skin) and reused for many
+    steps (a Verlet list).
+
+    A body's list holds the partners of its world it owns whose bounding circles come within
+    ``layout.skin`` of its own, in ascending id (``ContactStage.build_list``). As long as no
+    body of the world has moved more than half the skin since (``ContactStage.moved``), no
+    pair outside the lists can have come into contact, so each step only filters its list by
+    the exact bounding-circle test; the step that finds a body past half the skin marks the
+    world's lists stale, and they are rebuilt before its next step. The lists are scratch:
+    a world without valid lists (``world_nbr_stale``, 1 at the start) rebuilds them first.
+
+    Its fields are declared in ``taichi_ice.schema`` (``NEIGHBOURS``).
+    """
+
+    def __init__(self, layout: Layout):
+        super().__init__(layout, schema.groups()["nbr"])

@@ -99,6 +99,7 @@ class Status(_Labelled):
     SLOT_OVERFLOW = 0  # most contacts any body needed this step (compare with the slots)
     NONFINITE = 1  # 1 if a body's velocity became non-finite
     RUNAWAY = 2  # 1 if a body moved more than the runaway distance in one step
+    LIST_OVERFLOW = 3  # most neighbour-list entries any body needed (compare with nbr_len)
 
 
 class OverlapKind(_Labelled):

@@ -177,7 +177,6 @@ class ContactStage(Stage):
                 "body_radius",
                 "body_vert_start",
                 "body_vert_count",
-                "vert_local",
                 "world_large_start",
                 "large_ids",
                 "world_mu",
@@ -196,7 +195,7 @@ class ContactStage(Stage):
                 # Data in
                 "time_step",
                 "body_pos",
-                "body_angle",
+                "vert_turned",
                 "body_vel",
                 "body_omega",
                 "contact_count",
@@ -239,8 +238,9 @@ class ContactStage(Stage):
         )
     }
 
-    def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash):
-        self.layout, self.model, self.data, self.hash = layout, model, data, spatial_hash
+    def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash, neighbours):
+        self.layout, self.model, self.data = layout, model, data
+        self.hash, self.neighbours = spatial_hash, neighbours
         self.k_e = float(layout.contact_stiffness)
         self.k_v = float(layout.contact_viscosity)
         self.ratio = float(layout.tangential_stiffness)
@@ -258,16 +258,16 @@ class ContactStage(Stage):
 
         Clipping near the pair rather than in world coordinates keeps float32 accurate in
         large fields: its resolution then scales with the bodies' size, not the domain's.
+        The turned outline is the integrator's (``vert_turned``), once per body per step.
         """
         m, d = ti.static((self.model, self.data))
         p = ti.Matrix.zero(self.layout.real, self.maxv, 2)
-        c, s = ti.cos(d.body_angle[i]), ti.sin(d.body_angle[i])
         x = d.body_pos[i] - origin
         start, count = m.body_vert_start[i], m.body_vert_count[i]
         for k in range(count):
-            v = m.vert_local[start + k]
-            p[k, 0] = x[0] + c * v[0] - s * v[1]
-            p[k, 1] = x[1] + s * v[0] + c * v[1]
+            v = d.vert_turned[start + k]
+            p[k, 0] = x[0] + v[0]
+            p[k, 1] = x[1] + v[1]
         return p, count
 
     @ti.func
@@ -400,13 +400,13 @@ class ContactStage(Stage):
         return (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach
 
     @ti.func
-    def beyond_a_face(self, i, j):
-        """Body i's bounding circle lies wholly outside one face of body j (so they cannot
-        overlap): a cheap rejection for large bodies, whose bounding circles (a wall's is
-        half its length) meet nearly every small body of the world."""
+    def beyond_a_face(self, i, j, margin):
+        """Body i's bounding circle, grown by ``margin``, lies wholly outside one face of
+        body j (so they cannot overlap): a cheap rejection for large bodies, whose bounding
+        circles (a wall's is half its length) meet nearly every small body of the world."""
         m, d = ti.static((self.model, self.data))
         q, n_q = self.outline(j, d.body_pos[i])  # relative to i's centroid
-        r = m.body_radius[i]
+        r = m.body_radius[i] + margin
         outside = False
         for k in range(n_q):
             a = ti.Vector([q[k, 0], q[k, 1]])
@@ -417,20 +417,109 @@ class ContactStage(Stage):
                 outside = True
         return outside
 
+    @ti.func
+    def wants(self, i, j):
+        """True if body i handles the pair (i, j), j != i, of its world.
+
+        Small dynamic bodies own their contacts with small bodies that are not dynamic and,
+        among dynamic ones, those of higher id; small bodies own their contacts with large
+        ones if either is dynamic (a small fixed or kinematic body, a pillar, those with
+        large dynamic bodies); large bodies among themselves the lower id, if either moves.
+        """
+        m, _d = ti.static((self.model, self.data))
+        dyn_i = m.body_kind[i] == BodyKind.DYNAMIC
+        dyn_j = m.body_kind[j] == BodyKind.DYNAMIC
+        keep = False
+        if m.body_small[j]:
+            keep = m.body_small[i] != 0 and self.owns(i, j)
+        elif m.body_small[i]:
+            keep = dyn_i or dyn_j
+        else:
+            keep = j > i and (dyn_i or dyn_j)
+        return keep
+
+    @ti.func
+    def body(self, i, cand, n, cur, dt):
+        """Every contact of owner i with its candidate partners ``cand[:n]`` (ascending ids,
+        so the sums of a body do not depend on how the candidates were found); memory read
+        from buffer cur, written to 1 - cur."""
+        _m, d = ti.static((self.model, self.data))
+        nxt = 1 - cur
+        used = 0
+        # The owner's outline once for all its candidates.
+        p, n_p = self.outline(i, d.body_pos[i])
+        for k in range(ti.min(n, self.n_cand)):
+            used = self.pair(i, cand[k], p, n_p, cur, used, dt)
+        d.contact_count[nxt, i] = ti.min(used, self.layout.slots)
+        # More contacts than slots, or more near neighbours than the candidate list holds,
+        # is reported (never silently dropped): the caller turns it into CapacityError.
+        need = used
+        if n > self.n_cand:
+            need = ti.max(need, n)
+        if need > self.layout.slots:
+            ti.atomic_max(d.status[Status.SLOT_OVERFLOW], need)
+
+    @ti.func
+    def build_list(self, i):
+        """Body i's neighbour list: the partners of its world it owns (``wants``) whose
+        bounding circles come within the skin of its own (and, for large partners, whose
+        faces do not all lie beyond it), ascending; and where body i stands now."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        skin = ti.static(self.layout.skin)
+        w = m.body_world[i]
+        n = 0
+        for j in range(m.world_body_start[w], m.world_body_start[w + 1]):
+            if j != i and self.wants(i, j):
+                reach = m.body_radius[i] + m.body_radius[j] + skin
+                if (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach:
+                    if m.body_small[j] or not self.beyond_a_face(i, j, skin):
+                        if n < self.layout.nbr_len:
+                            nb.nbr_ids[i, n] = j
+                        n += 1
+        nb.nbr_count[i] = ti.min(n, self.layout.nbr_len)
+        nb.nbr_ref_pos[i] = d.body_pos[i]
+        nb.nbr_ref_angle[i] = d.body_angle[i]
+        if n > self.layout.nbr_len:
+            ti.atomic_max(d.status[Status.LIST_OVERFLOW], n)
+
+    @ti.func
+    def moved(self, i):
+        """How far any point of body i that the lists rely on has moved since its list was
+        built (m): its centroid for a small body (the bounding circle turns with it); for a
+        large one, whose faces are tested, also its circumradius times the turn."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        dist = (d.body_pos[i] - nb.nbr_ref_pos[i]).norm()
+        if not m.body_small[i]:
+            dist += m.body_radius[i] * ti.abs(d.body_angle[i] - nb.nbr_ref_angle[i])
+        return dist
+
+    @ti.func
+    def listed(self, i, cur, dt):
+        """Body i's contacts, its candidates taken from its neighbour list."""
+        nb, _d = ti.static((self.neighbours, self.data))
+        cand = ti.Vector.zero(ti.i32, self.n_cand)
+        n = 0
+        for k in range(nb.nbr_count[i]):
+            j = nb.nbr_ids[i, k]
+            if self.near(i, j):
+                if n < self.n_cand:
+                    cand[n] = j
+                n += 1
+        self.body(i, cand, n, cur, dt)
+
     @ti.kernel
     def compute(self, cur: ti.i32):
-        """Forces of every contact of the step; memory read from buffer cur, written to 1-cur."""
+        """Forces of every contact of the step, candidates from the spatial hash; memory read
+        from buffer cur, written to 1 - cur."""
         m, d, h = ti.static((self.model, self.data, self.hash))
-        nxt = 1 - cur
-        dt = d.time_step[None]
         for i in range(self.layout.n_bodies):
+            dt = d.time_step[None]
             # Gather the partners first, then handle them in one loop: the narrow phase is
             # inlined once, which keeps the kernel's compile time short.
             cand = ti.Vector.zero(ti.i32, self.n_cand)
             n = 0
             w = m.body_world[i]
-            dyn_i = m.body_kind[i] == BodyKind.DYNAMIC
-            if m.body_small[i] and dyn_i:
+            if m.body_small[i] and m.body_kind[i] == BodyKind.DYNAMIC:
                 c = h.body_cell[i]
                 for nb in range(9):
                     cell = c + ti.Vector([nb % 3 - 1, nb // 3 - 1])
@@ -451,28 +540,16 @@ class ContactStage(Stage):
                             n += 1
             for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
                 j = m.large_ids[g]
-                dyn_j = m.body_kind[j] == BodyKind.DYNAMIC
-                # Small dynamic bodies own their contacts with large ones; a small fixed or
-                # kinematic body (a pillar) those with large dynamic bodies; large bodies
-                # among themselves the lower id, if either moves freely.
-                keep = False
-                if m.body_small[i]:
-                    keep = dyn_i or dyn_j
-                else:
-                    keep = j > i and (dyn_i or dyn_j)
-                if keep and self.near(i, j) and not self.beyond_a_face(i, j):
+                if self.wants(i, j) and self.near(i, j) and not self.beyond_a_face(i, j, 0.0):
                     if n < self.n_cand:
                         cand[n] = j
                     n += 1
-            used = 0
-            # The owner's outline once for all its candidates.
-            p, n_p = self.outline(i, d.body_pos[i])
-            for k in range(ti.min(n, self.n_cand)):
-                used = self.pair(i, cand[k], p, n_p, cur, used, dt)
-            d.contact_count[nxt, i] = ti.min(used, self.layout.slots)
-            # More contacts than slots, or more near neighbours than the candidate list holds,
-            # is reported (never silently dropped): the caller turns it into CapacityError.
-            need = used
-            if n > self.n_cand:
-                need = ti.max(need, n)
-            ti.atomic_max(d.status[Status.SLOT_OVERFLOW], need)
+            # Ascending ids, as the neighbour lists give them (insertion sort: a few entries).
+            for k in range(1, ti.min(n, self.n_cand)):
+                v = cand[k]
+                s = k
+                while s > 0 and cand[s - 1] > v:
+                    cand[s] = cand[s - 1]
+                    s -= 1
+                cand[s] = v
+            self.body(i, cand, n, cur, dt)

@@ -171,10 +171,12 @@ def min_penetration_axis(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarra
         q: ``(m, 2)`` counter-clockwise convex polygon (m).
 
     Returns:
-        ``(depth, axis)``: depth (m) is positive when the polygons overlap and ``<= 0`` when
-        an edge line separates them (then ``-depth`` is the largest gap along an edge
-        normal); ``axis`` is the ``(2,)`` unit normal of that edge, oriented from ``p``
-        toward ``q``. Ties go to the first edge of ``p``, then of ``q``.
+        ``(depth, axis)``: depth (m) is positive when the polygons overlap, the smallest
+        penetration, and ``<= 0`` when an edge line separates them: then ``-depth`` is the
+        gap along the first separating edge normal (edges of ``p`` in order, then of ``q``;
+        the search stops there), a lower bound on their distance. ``axis`` is the ``(2,)``
+        unit normal of that edge, oriented from ``p`` toward ``q``. Ties go to the first
+        edge of ``p``, then of ``q``.
     """
     p = np.asarray(p, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
@@ -188,6 +190,10 @@ def min_penetration_axis(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarra
         # rel[k, j] = n_k . (other_j - own_k)
         rel = np.einsum("kd,kjd->kj", normals, other[None, :, :] - own[:, None, :])
         depths = -rel.min(axis=1)
+        separating = np.flatnonzero(depths <= 0.0)
+        if separating.size:
+            k = int(separating[0])
+            return float(depths[k]), sign * normals[k]
         k = int(np.argmin(depths))
         if depths[k] < best_depth:
             best_depth = float(depths[k])
@@ -403,9 +409,12 @@ def min_penetration_axis_ti(p, n_p, q, n_q):
         n_q: number of vertices of ``q`` (3 <= n_q <= Q).
 
     Returns:
-        ``(depth, axis)``: depth (m), positive when overlapping, ``<= 0`` when separated;
-        axis a unit 2-vector from ``p`` toward ``q``.
+        ``(depth, axis)`` as :func:`min_penetration_axis`: depth (m), the smallest
+        penetration when overlapping, the gap along the first separating edge (``<= 0``)
+        when separated; axis a unit 2-vector from ``p`` toward ``q``.
     """
+    # Stops at the first separating axis: most candidate pairs of a dense field are near
+    # misses, and the depth of a separated pair only matters by its sign.
     depth = 0.0
     axis = ti.math.vec2(0.0, 0.0)
     for k in range(n_p):
@@ -418,16 +427,21 @@ def min_penetration_axis_ti(p, n_p, q, n_q):
         if k == 0 or -lowest < depth:
             depth = -lowest
             axis = n
-    for k in range(n_q):
-        a = _row(q, k)
-        e = _row(q, (k + 1) % n_q) - a
-        n = ti.math.vec2(e[1], -e[0]).normalized()
-        lowest = ti.math.dot(n, _row(p, 0) - a)
-        for j in range(1, n_p):
-            lowest = ti.min(lowest, ti.math.dot(n, _row(p, j) - a))
-        if -lowest < depth:
-            depth = -lowest
-            axis = -n
+        if depth <= 0.0:
+            break
+    if depth > 0.0:
+        for k in range(n_q):
+            a = _row(q, k)
+            e = _row(q, (k + 1) % n_q) - a
+            n = ti.math.vec2(e[1], -e[0]).normalized()
+            lowest = ti.math.dot(n, _row(p, 0) - a)
+            for j in range(1, n_p):
+                lowest = ti.min(lowest, ti.math.dot(n, _row(p, j) - a))
+            if -lowest < depth:
+                depth = -lowest
+                axis = -n
+            if depth <= 0.0:
+                break
     return depth, axis
 
 

@@ -39,6 +39,9 @@ class Integrator(Stage):
                 "body_drag_rotational",
                 "body_inv_mass",
                 "body_inv_inertia",
+                "body_vert_start",
+                "body_vert_count",
+                "vert_local",
                 # Data in
                 "time_step",
                 "body_force_q",
@@ -60,8 +63,13 @@ class Integrator(Stage):
                 "body_angle",
                 "body_energy",
                 "status",
+                "vert_turned",
             ),
-        )
+        ),
+        "orient": Access(
+            reads=("body_angle", "body_vert_start", "body_vert_count", "vert_local"),
+            writes=("vert_turned",),
+        ),
     }
 
     def __init__(self, layout: Layout, model: Model, data: Data):
@@ -70,46 +78,70 @@ class Integrator(Stage):
         self.runaway_speed = float(layout.runaway_speed)
 
     @ti.kernel
-    def advance(self):
-        m, d = ti.static((self.model, self.data))
-        dt = d.time_step[None]
+    def orient(self):
+        """Turn every body's outline to its angle (``vert_turned``): once at set-up; the
+        step turns the bodies that move."""
         for i in range(self.layout.n_bodies):
-            f = ti.cast(d.body_force_q[i], self.layout.real) * FORCE_QUANTUM
-            tau = ti.cast(d.body_torque_q[i], self.layout.real) * FORCE_QUANTUM
-            d.body_force_q[i] = ti.Vector([0, 0], ti.i64)
-            d.body_torque_q[i] = 0
-            p = m.body_probe[i]
-            if p >= 0:
-                d.probe_impulse[p] += ti.cast(f * dt, ti.f64)
-            kind = m.body_kind[i]
-            if kind == BodyKind.DYNAMIC:
-                v0, w0 = d.body_vel[i], d.body_omega[i]
-                f_ext = m.body_force_ext[i]
-                f_drag = ti.Vector([0.0, 0.0], self.layout.real)
-                t_drag = ti.cast(0.0, self.layout.real)
-                if ti.static(self.layout.water):
-                    f_drag, t_drag = water_drag_ti(
-                        v0, w0, m.body_drag_linear[i], m.body_drag_rotational[i]
-                    )
-                v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
-                w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
-                vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
-                d.body_energy[i, BodyEnergy.DRAG] += ti.cast(
-                    -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
+            self.turn(i)
+
+    @ti.func
+    def turn(self, i):
+        """Body i's outline turned to its angle, relative to its centroid."""
+        m, d = ti.static((self.model, self.data))
+        c, s = ti.cos(d.body_angle[i]), ti.sin(d.body_angle[i])
+        start = m.body_vert_start[i]
+        for k in range(m.body_vert_count[i]):
+            v = m.vert_local[start + k]
+            d.vert_turned[start + k] = ti.Vector([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+    @ti.kernel
+    def advance(self):
+        for i in range(self.layout.n_bodies):
+            self.body(i, self.data.time_step[None])
+
+    @ti.func
+    def body(self, i, dt):
+        """Advance body i by one step of dt."""
+        m, d = ti.static((self.model, self.data))
+        f = ti.cast(d.body_force_q[i], self.layout.real) * FORCE_QUANTUM
+        tau = ti.cast(d.body_torque_q[i], self.layout.real) * FORCE_QUANTUM
+        d.body_force_q[i] = ti.Vector([0, 0], ti.i64)
+        d.body_torque_q[i] = 0
+        p = m.body_probe[i]
+        if p >= 0:
+            d.probe_impulse[p] += ti.cast(f * dt, ti.f64)
+        kind = m.body_kind[i]
+        if kind == BodyKind.DYNAMIC:
+            v0, w0 = d.body_vel[i], d.body_omega[i]
+            f_ext = m.body_force_ext[i]
+            f_drag = ti.Vector([0.0, 0.0], self.layout.real)
+            t_drag = ti.cast(0.0, self.layout.real)
+            if ti.static(self.layout.water):
+                f_drag, t_drag = water_drag_ti(
+                    v0, w0, m.body_drag_linear[i], m.body_drag_rotational[i]
                 )
-                d.body_energy[i, BodyEnergy.WORK] += ti.cast(f_ext.dot(vm) * dt, ti.f64)
-                d.body_vel[i] = v1
-                d.body_omega[i] = w1
-                d.body_pos[i] += dt * v1
-                d.body_angle[i] += dt * w1
-                speed2 = v1.norm_sqr()
-                if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
-                    d.status[Status.NONFINITE] = 1
-                elif speed2 > self.runaway_speed * self.runaway_speed:
-                    d.status[Status.RUNAWAY] = 1
-            elif kind == BodyKind.KINEMATIC:
-                # The contact force f acts on the pusher; the pusher does -f.v on the rest.
-                v, w = d.body_vel[i], d.body_omega[i]
-                d.body_energy[i, BodyEnergy.WORK] += ti.cast(-(f.dot(v) + tau * w) * dt, ti.f64)
-                d.body_pos[i] += dt * v
-                d.body_angle[i] += dt * w
+            v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
+            w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
+            vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
+            d.body_energy[i, BodyEnergy.DRAG] += ti.cast(
+                -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
+            )
+            d.body_energy[i, BodyEnergy.WORK] += ti.cast(f_ext.dot(vm) * dt, ti.f64)
+            d.body_vel[i] = v1
+            d.body_omega[i] = w1
+            d.body_pos[i] += dt * v1
+            d.body_angle[i] += dt * w1
+            self.turn(i)
+            speed2 = v1.norm_sqr()
+            if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
+                d.status[Status.NONFINITE] = 1
+            elif speed2 > self.runaway_speed * self.runaway_speed:
+                d.status[Status.RUNAWAY] = 1
+        elif kind == BodyKind.KINEMATIC:
+            # The contact force f acts on the pusher; the pusher does -f.v on the rest.
+            v, w = d.body_vel[i], d.body_omega[i]
+            d.body_energy[i, BodyEnergy.WORK] += ti.cast(-(f.dot(v) + tau * w) * dt, ti.f64)
+            d.body_pos[i] += dt * v
+            d.body_angle[i] += dt * w
+            if w != 0.0:
+                self.turn(i)

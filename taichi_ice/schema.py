@@ -21,6 +21,7 @@ slots      K, contact slots per body
 buffers    2: contact memory alternates between two buffers, step by step
 hash_size  H, buckets of the spatial hash (a power of two)
 scan_blocks H / SCAN, blocks of the hash's two-level prefix sum
+nbr_len    C, entries of a body's neighbour list (candidate partners it owns)
 ========== ===============================================================================
 
 plus the lengths of the code tables (``energy_terms``, ``body_energy_terms``,
@@ -193,6 +194,7 @@ DATA: tuple[Var, ...] = (
     Var("body_angle", "real", ("n_bodies",), "rad", "orientation, counter-clockwise", init=HOST),
     Var("body_vel", "real", ("n_bodies",), "m/s", "centroid velocity", lanes=2, init=HOST),
     Var("body_omega", "real", ("n_bodies",), "rad/s", "angular velocity", init=HOST),
+    Var("vert_turned", "real", ("n_verts",), "m", "outline turned to the body's angle, relative to its centroid (vert_local rotated), updated as the body turns", lanes=2),
     Var("body_force_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "contact force gathered this step, fixed point", lanes=2),
     Var("body_torque_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "contact torque gathered this step, fixed point"),
     Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic"),
@@ -218,15 +220,25 @@ HASH: tuple[Var, ...] = (
     Var("sorted_ids", "i32", ("n_small",), "id", "small body ids, grouped by bucket"),
     Var("body_cell", "i32", ("n_bodies",), "id", "integer cell of each small body", lanes=2),
 )
+
+# Neighbour lists with a skin (broadphase.NeighbourList), rebuilt when a body has moved half
+# the skin since the last build.
+NEIGHBOURS: tuple[Var, ...] = (
+    Var("nbr_ids", "i32", ("n_bodies", "nbr_len"), "id", "partners a body owns whose bounding circles come within the skin, ascending"),
+    Var("nbr_count", "i32", ("n_bodies",), "", "entries of each body's list"),
+    Var("nbr_ref_pos", "real", ("n_bodies",), "m", "centroid when the list was built", lanes=2),
+    Var("nbr_ref_angle", "real", ("n_bodies",), "rad", "angle when the list was built"),
+    Var("world_nbr_stale", "i32", ("n_worlds",), "", "1 if the world's lists must be rebuilt before its next step", init=1),
+)
 # fmt: on
 
 GROUPS: dict[str, tuple[Var, ...]] = {}
 
 
 def groups() -> dict[str, tuple[Var, ...]]:
-    """``{"model": ..., "data": ..., "hash": ...}``: every declared field by group."""
+    """``{"model": ..., "data": ..., "hash": ..., "nbr": ...}``: every declared field by group."""
     if not GROUPS:
-        GROUPS.update(model=MODEL + tuple(_law_params()), data=DATA, hash=HASH)
+        GROUPS.update(model=MODEL + tuple(_law_params()), data=DATA, hash=HASH, nbr=NEIGHBOURS)
     return GROUPS
 
 
@@ -275,6 +287,10 @@ class Layout:
             times the contact width.
         runaway_speed: a dynamic body faster than this (m/s) flags the run as diverged.
         precision: ``"f64"`` or ``"f32"``, the type of every ``real`` field.
+        nbr_len: entries of a body's neighbour list.
+        skin: margin (m) of the neighbour lists: a pair is listed when its bounding circles
+            come within ``skin`` of each other, and a world's lists are rebuilt when one of
+            its bodies has moved ``skin / 2``.
     """
 
     n_bodies: int
@@ -298,6 +314,8 @@ class Layout:
     crushing_force: float
     runaway_speed: float
     precision: str = "f64"
+    nbr_len: int = 1
+    skin: float = 0.0
 
     @property
     def real(self):
@@ -436,7 +454,9 @@ class Stage:
 
 def fields_touched(cls: type, kernel: str) -> tuple[set[str], set[str]]:
     """(read, written) field names that a kernel of stage class ``cls`` touches, from its
-    source and the source of every method of ``cls`` it calls (transitively).
+    source and the source of every method of ``cls`` it calls (transitively), including
+    methods of the stages it holds as ``PARTS`` (``{"contacts": ContactStage}``: a call
+    ``self.contacts.f(...)`` is followed into ``ContactStage.f``).
 
     A field counts as written when it is (inside) an assignment target or the first argument
     of a ``ti.atomic_*`` call, and as read wherever it appears except as the target of a
@@ -446,24 +466,30 @@ def fields_touched(cls: type, kernel: str) -> tuple[set[str], set[str]]:
     declared = {v.name for g in groups().values() for v in g}
     reads: set[str] = set()
     writes: set[str] = set()
-    todo, seen = [kernel], set()
+    todo, seen = [(cls, kernel)], set()
     while todo:
-        name = todo.pop()
-        if name in seen:
+        owner, name = todo.pop()
+        if (owner, name) in seen:
             continue
-        seen.add(name)
-        func = inspect.unwrap(getattr(cls, name))
+        seen.add((owner, name))
+        func = inspect.unwrap(getattr(owner, name))
         func = getattr(func, "func", func)  # a Taichi kernel wraps the Python function
         tree = ast.parse(textwrap.dedent(inspect.getsource(func)))
+        parts = getattr(owner, "PARTS", {})
         for node in ast.walk(tree):
-            if (
-                isinstance(node, ast.Call)
-                and isinstance(node.func, ast.Attribute)
-                and isinstance(node.func.value, ast.Name)
-                and node.func.value.id == "self"
-                and hasattr(cls, node.func.attr)
-            ):
-                todo.append(node.func.attr)
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+                target = node.func.value
+                if isinstance(target, ast.Name) and target.id == "self":
+                    if hasattr(owner, node.func.attr):
+                        todo.append((owner, node.func.attr))
+                elif (
+                    isinstance(target, ast.Attribute)
+                    and isinstance(target.value, ast.Name)
+                    and target.value.id == "self"
+                    and target.attr in parts
+                ):
+                    # A method of a stage this one holds (``self.contacts.body(...)``).
+                    todo.append((parts[target.attr], node.func.attr))
             targets: list[ast.AST] = []
             if isinstance(node, ast.Assign):
                 targets = node.targets
@@ -579,6 +605,7 @@ def markdown_table() -> str:
         "model": "Model: static after set-up",
         "data": "Data: mutable",
         "hash": "Spatial hash: rebuilt every step",
+        "nbr": "Neighbour lists: rebuilt when a body has moved half the skin",
     }
     for group, fields in groups().items():
         lines += [

@@ -61,6 +61,8 @@ class Simulation:
         dt: time step (s) overriding the scenes' (still refused above the stability limit
             unless ``force_dt``).
         slots: contact slots per body (default sized from the scene).
+        stepping: how the worlds are stepped (``World``): "auto", "worlds" (a thread per
+            world, many steps per kernel launch) or "bodies" (parallel over bodies).
     """
 
     def __init__(
@@ -72,6 +74,7 @@ class Simulation:
         dt: float | None = None,
         force_dt: bool = False,
         slots: int | None = None,
+        stepping: str = "auto",
     ):
         from .world import World
 
@@ -97,7 +100,14 @@ class Simulation:
             self.series_every = 0
         self.dt = first.output_interval / self.frame_every
         self.series_every = self.series_every or max(1, round(first.series_interval / self.dt))
-        self.world = World(scenes, dt=self.dt, precision=precision, slots=slots, force_dt=force_dt)
+        self.world = World(
+            scenes,
+            dt=self.dt,
+            precision=precision,
+            slots=slots,
+            force_dt=force_dt,
+            stepping=stepping,
+        )
         # Kinetic and elastic energy at t = 0: the budget's starting capital.
         self.initial_energy = self.world.energies().copy()
 
@@ -114,8 +124,7 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` steps (no output, no checks; call ``check`` or use ``run``)."""
-        for _ in range(n):
-            self.world.step()
+        self.world.advance(n)
 
     def check(self) -> None:
         """Raise CapacityError or DivergenceError if the last steps overflowed or diverged."""
@@ -184,8 +193,17 @@ class Simulation:
         try:
             self._sample(series, writers, sample_dt=self.series_every * self.dt)
             self._frame(writers)
-            for k in range(1, n_total + 1):
-                self.world.step()
+            k = 0
+            while k < n_total:
+                # Step to the next sample, frame or the end in one go (World.advance: one
+                # launch for all of them when the worlds are stepped a thread each).
+                stride = min(
+                    self.series_every - k % self.series_every,
+                    self.frame_every - k % self.frame_every,
+                    n_total - k,
+                )
+                self.world.advance(stride)
+                k += stride
                 if k % self.series_every == 0 or k == n_total:
                     self.world.check()
                     steps_since = k % self.series_every or self.series_every

@@ -1,10 +1,16 @@
 """A batch of independent worlds and its step: the algorithm, stage by stage.
 
+Stepping in parallel over bodies (``stepping="bodies"``: large worlds), three kernel
+launches per step, whatever the number of worlds or bodies:
+
     step():  hash.build()          broad phase: bucket every small body by its cell
              contacts.compute()    narrow phase, contact forces, contact memory
              integrator.advance()  forces -> velocities -> positions, work and drag
 
-Three kernel launches per step, whatever the number of worlds or bodies.
+Stepping in parallel over worlds (``stepping="worlds"``: small worlds, batches of them), one
+launch for many steps (``advance(n)``; ``stepper.WorldStepper``): the thread of a world
+rebuilds its neighbour lists when a body has moved half their skin, then runs the same
+contact and integration code body by body. Both give bit-identical states.
 """
 
 from __future__ import annotations
@@ -14,13 +20,14 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import backend, state
-from .assemble import assemble
-from .broadphase import SpatialHash
+from .assemble import LIST_SLOTS, assemble
+from .broadphase import NeighbourList, SpatialHash
 from .codes import Status
 from .contact import ContactStage
 from .energy import EnergyMeter
 from .errors import CapacityError, DivergenceError
 from .integrate import Integrator
+from .stepper import WorldStepper
 
 # The stages of a step, by the name their kernels are reported under (benchmarks, traffic).
 STAGES = {
@@ -28,7 +35,13 @@ STAGES = {
     "contacts": ContactStage,
     "integrator": Integrator,
     "energy": EnergyMeter,
+    "stepper": WorldStepper,
 }
+
+# "auto" steps worlds of up to this many bodies one thread per world (many steps per launch),
+# larger ones in parallel over bodies (benchmarks/small_scene.py measured the crossover).
+PER_WORLD_MAX_BODIES = 2000
+STEPPINGS = ("auto", "worlds", "bodies")
 
 
 class World:
@@ -40,6 +53,9 @@ class World:
         precision: 'f64' or 'f32' (Taichi must be started with the same, see backend.init).
         slots: contact slots per body; default sized from the scenes.
         force_dt: accept a dt above the stability limit.
+        stepping: "worlds" (one thread per world, many steps per launch: small worlds),
+            "bodies" (parallel over bodies, three launches per step: large worlds) or
+            "auto" (worlds if no world has more than ``PER_WORLD_MAX_BODIES`` bodies).
     """
 
     def __init__(
@@ -49,7 +65,10 @@ class World:
         precision: str = "f64",
         slots: int | None = None,
         force_dt: bool = False,
+        stepping: str = "auto",
     ):
+        if stepping not in STEPPINGS:
+            raise ValueError(f"stepping must be one of {STEPPINGS}, got {stepping!r}")
         backend.real_dtype(precision)
         self.batch = assemble(scenes, dt=dt, precision=precision, slots=slots, force_dt=force_dt)
         self.scenes = list(self.batch.scenes)
@@ -61,10 +80,20 @@ class World:
         state.upload(self.model, self.data, self.host)
         self.data.time_step[None] = self.dt
 
+        if stepping == "auto":
+            largest = int(np.diff(self.host.world_body_start).max(initial=0))
+            stepping = "worlds" if largest <= PER_WORLD_MAX_BODIES else "bodies"
+        self.stepping = stepping
+
         self.hash = SpatialHash(self.layout, self.model, self.data)
-        self.contacts = ContactStage(self.layout, self.model, self.data, self.hash)
+        self.neighbours = NeighbourList(self.layout)
+        self.contacts = ContactStage(self.layout, self.model, self.data, self.hash, self.neighbours)
         self.integrator = Integrator(self.layout, self.model, self.data)
+        self.integrator.orient()
         self.energy = EnergyMeter(self.layout, self.model, self.data)
+        self.stepper = WorldStepper(
+            self.layout, self.model, self.data, self.neighbours, self.contacts, self.integrator
+        )
         self.cur = 0  # contact buffer holding the memory of the last step
         self.steps = 0
         self.time = 0.0
@@ -75,21 +104,39 @@ class World:
 
     def step(self) -> None:
         """Advance every world by one time step."""
-        self.hash.build()
-        self.contacts.compute(self.cur)
-        self.integrator.advance()
-        self.cur = 1 - self.cur
-        self.steps += 1
+        self.advance(1)
+
+    def advance(self, n: int) -> None:
+        """Advance every world by ``n`` time steps (no read-back: call ``check`` after)."""
+        if n <= 0:
+            return
+        if self.stepping == "worlds":
+            self.stepper.run(n, self.cur)
+            self.cur = (self.cur + n) % 2
+        else:
+            for _ in range(n):
+                self.hash.build()
+                self.contacts.compute(self.cur)
+                self.integrator.advance()
+                self.cur = 1 - self.cur
+        self.steps += n
         self.time = self.steps * self.dt
 
     def check(self) -> None:
-        """Raise if a step overflowed the contact slots or diverged (reads back 3 integers)."""
+        """Raise if a step overflowed the contact slots or diverged (reads back the status word)."""
         status = self.data.status.to_numpy()
         if status[Status.SLOT_OVERFLOW] > self.layout.slots:
             raise CapacityError(
                 f"a body had {status[Status.SLOT_OVERFLOW]} contacts at t = {self.time:.4g} s, "
                 f"more than its {self.layout.slots} contact slots; pass slots="
                 f"{int(status[Status.SLOT_OVERFLOW]) + 4} (Simulation/World) to allow more"
+            )
+        listed = int(status[Status.LIST_OVERFLOW])
+        if listed > self.layout.nbr_len:
+            raise CapacityError(
+                f"a body had {listed} neighbours within the skin at t = {self.time:.4g} s, "
+                f"more than its list of {self.layout.nbr_len}; pass slots="
+                f"{-(-listed // LIST_SLOTS) + 2} (Simulation/World) to allow more"
             )
         if status[Status.NONFINITE]:
             raise DivergenceError(
@@ -104,6 +151,20 @@ class World:
                 f"stability limit {self.stable_dt:.3g} s); the run diverged: lower dt (or the "
                 "scene's dt_safety)"
             )
+
+    def place(self, positions: np.ndarray, angles: np.ndarray) -> None:
+        """Move every body to ``(N, 2)`` positions (m) and ``(N,)`` angles (rad): their
+        outlines are turned and the neighbour lists rebuilt before the next step."""
+        real = np.float64 if self.precision == "f64" else np.float32
+        n = self.layout.n_bodies
+        pos = self.data.body_pos.to_numpy()
+        ang = self.data.body_angle.to_numpy()
+        pos[:n] = np.asarray(positions, dtype=real).reshape(n, 2)
+        ang[:n] = np.asarray(angles, dtype=real).reshape(n)
+        self.data.body_pos.from_numpy(pos)
+        self.data.body_angle.from_numpy(ang)
+        self.integrator.orient()
+        self.neighbours.world_nbr_stale.fill(1)
 
     # ----------------------------------------------------------------------------------------
     # Reading the state

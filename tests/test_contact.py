@@ -165,8 +165,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
     seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0}
     worst = 0.0  # largest force difference (N)
     for step in range(2):
-        d.body_pos.from_numpy(state.pos)
-        d.body_angle.from_numpy(state.angle)
+        world.place(state.pos, state.angle)
         d.body_force_q.fill(0)
         d.body_torque_q.fill(0)
         d.body_energy.fill(0.0)
@@ -325,8 +324,7 @@ def test_spatial_hash_finds_exactly_the_overlapping_pairs(f64):
     for w, sl in enumerate(world.world_slices()):
         pos[sl.start] = [side / 2, 2.0 + 3.0 * w]  # wall_a across the square
         pos[sl.start + 1] = [5.0 - 3.0 * w, side / 2]  # wall_b across the square
-    world.data.body_pos.from_numpy(pos)
-    world.data.body_angle.from_numpy(ang)
+    world.place(pos, ang)
     world.hash.build()
     world.contacts.compute(world.cur)
     assert world.data.status.to_numpy()[Status.SLOT_OVERFLOW] <= world.layout.slots

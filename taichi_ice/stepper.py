@@ -1,0 +1,150 @@
+"""Many steps per kernel launch: each thread steps one world, body by body.
+
+A scene of tens of blocks does less work per step than a kernel launch costs: stepping it
+with ``World.step`` (three launches and a dozen offloaded tasks per step) spends most of its
+time starting threads. ``WorldStepper.run(n, cur)`` instead launches once for ``n`` steps;
+its one parallel loop runs over the worlds of the batch, and the thread of a world takes it
+through the ``n`` steps in turn:
+
+    for each step:   rebuild the world's neighbour lists if a body moved half the skin
+                     contacts of every body, candidates from its list   (ContactStage)
+                     advance every body                                 (Integrator)
+
+The contact and integration code is the very code of the parallel step (the same Taichi
+functions), and a body's candidates come in the same order (ascending ids) however they
+were found, so the two ways of stepping give bit-identical states (tests/test_engine.py).
+A batch of small worlds fills the cores with worlds; a single large world should be stepped
+in parallel over its bodies (``World.step``): ``World`` chooses (``stepping``).
+"""
+
+# No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+
+from typing import ClassVar
+
+import taichi as ti
+
+from .broadphase import NeighbourList
+from .contact import ContactStage
+from .integrate import Integrator
+from .schema import Access, Layout, Stage
+from .state import Data, Model
+
+
+@ti.data_oriented
+class WorldStepper(Stage):
+    """Steps every world ``n`` times in one launch, one thread per world."""
+
+    # Per step (``n`` = 1): the contact stage's and the integrator's traffic; the lists are
+    # read every step and rebuilt rarely.
+    ACCESS: ClassVar[dict[str, Access]] = {
+        "run": Access(
+            reads=(
+                "body_angle",
+                "body_drag_linear",
+                "body_drag_rotational",
+                "body_energy",
+                "body_force_ext",
+                "body_force_q",
+                "body_inv_inertia",
+                "body_inv_mass",
+                "body_kind",
+                "body_omega",
+                "body_pos",
+                "body_probe",
+                "body_radius",
+                "body_small",
+                "body_torque_q",
+                "body_vel",
+                "body_vert_count",
+                "body_vert_start",
+                "body_world",
+                "contact_count",
+                "contact_crushed",
+                "contact_elastic",
+                "contact_partner",
+                "contact_theta",
+                "contact_xi",
+                "nbr_count",
+                "nbr_ids",
+                "nbr_ref_angle",
+                "nbr_ref_pos",
+                "probe_impulse",
+                "status",
+                "time_step",
+                "vert_local",
+                "vert_turned",
+                "world_A",
+                "world_B",
+                "world_body_start",
+                "world_memory",
+                "world_mu",
+                "world_mu0",
+                "world_nbr_stale",
+                "world_rest_rule",
+                "world_t_c",
+                "world_v_star",
+            ),
+            writes=(
+                "body_angle",
+                "body_energy",
+                "body_force_q",
+                "body_omega",
+                "body_pos",
+                "body_torque_q",
+                "body_vel",
+                "contact_area",
+                "contact_count",
+                "contact_crushed",
+                "contact_elastic",
+                "contact_partner",
+                "contact_theta",
+                "contact_xi",
+                "nbr_count",
+                "nbr_ids",
+                "nbr_ref_angle",
+                "nbr_ref_pos",
+                "probe_impulse",
+                "status",
+                "vert_turned",
+                "world_nbr_stale",
+            ),
+            per_contact=ContactStage.ACCESS["compute"].per_contact,
+        )
+    }
+    PARTS: ClassVar[dict[str, type]] = {"contacts": ContactStage, "integrator": Integrator}
+
+    def __init__(
+        self,
+        layout: Layout,
+        model: Model,
+        data: Data,
+        neighbours: NeighbourList,
+        contacts: ContactStage,
+        integrator: Integrator,
+    ):
+        self.layout, self.model, self.data = layout, model, data
+        self.neighbours, self.contacts, self.integrator = neighbours, contacts, integrator
+        self.half_skin = 0.5 * float(layout.skin)
+
+    @ti.kernel
+    def run(self, n: ti.i32, cur: ti.i32):
+        """``n`` steps of every world; contact memory starts in buffer ``cur`` and alternates."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        for w in range(self.layout.n_worlds):
+            dt = d.time_step[None]
+            lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
+            for s in range(n):
+                buf = (cur + s) % 2
+                if nb.world_nbr_stale[w]:
+                    for i in range(lo, hi):
+                        self.contacts.build_list(i)
+                    nb.world_nbr_stale[w] = 0
+                for i in range(lo, hi):
+                    self.contacts.listed(i, buf, dt)
+                stale = 0
+                for i in range(lo, hi):
+                    self.integrator.body(i, dt)
+                    if self.contacts.moved(i) > self.half_skin:
+                        stale = 1
+                if stale:
+                    nb.world_nbr_stale[w] = 1

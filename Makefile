@@ -29,7 +29,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check taichi_ice tests validation benchmarks
 
 bench: $(STAMP)
-	$(BIN)/python benchmarks/rubble_field.py --out $(OUT)/bench
+	$(BIN)/taichi-ice bench --out $(OUT)/bench
 
 clean:
 	rm -rf $(VENV) $(OUT) *.egg-info

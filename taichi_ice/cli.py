@@ -31,6 +31,10 @@ EXAMPLES = {
   taichi-ice ensemble scenarios/pillar.toml --seeds 32 --out out/ens
   taichi-ice ensemble scenarios/pillar.toml --seeds 8 --friction coulomb:0.3 \\
       --friction rate-state:t_c=5 --until 10 --out out/ens""",
+    "bench": """examples:
+  taichi-ice bench --out out/bench                  # 1e3, 1e4, 1e5 blocks; f64 and f32; Box2D
+  taichi-ice bench --sizes 1e5 1e6 --precision f32 --arch gpu --no-box2d
+  taichi-ice bench --sizes 200 --steps 5 --no-box2d --out /tmp/bench   # a smoke run""",
     "plot": """examples:
   taichi-ice plot runs/pushed.h5                    # figures beside the file
   taichi-ice plot runs/pushed.h5 --out figs/ --animate""",
@@ -136,6 +140,12 @@ def _cmd_ensemble(args) -> int:
         precision=args.precision,
         progress=not args.quiet,
     )
+
+
+def _cmd_bench(args) -> int:
+    from .bench import bench_command
+
+    return bench_command(args)
 
 
 def _cmd_plot(args) -> int:
@@ -266,6 +276,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="a law to run (repeatable; default the scene's): coulomb[:MU], rate-state[:..]",
     )
     _engine_options(p)
+
+    p = add(
+        "bench",
+        "throughput, contacts and memory on a box of diamonds, 1e3 to 1e6 blocks, against Box2D v3",
+        _cmd_bench,
+    )
+    from .bench import add_options
+
+    add_options(p)
 
     p = add("plot", "figures (and an animation) of a run file", _cmd_plot)
     p.add_argument("run", help="HDF5 run file")

@@ -19,7 +19,7 @@ from .codes import BodyKind
 if TYPE_CHECKING:
     from .scene import Body
 
-__all__ = ["OVERLAP_RTOL", "find_overlaps"]
+__all__ = ["OVERLAP_RTOL", "find_overlaps", "penetration_depth"]
 
 # Two bodies overlap at the start when their overlap area exceeds this fraction of the smaller
 # one's area. Blocks laid edge to edge touch exactly, and round-off leaves them an overlap
@@ -123,8 +123,23 @@ def _sat_depth(groups, group_of, row_of, pos, a: np.ndarray, b: np.ndarray) -> n
                     continue
                 p = groups[g][row_of[a[chunk]]] + pos[a[chunk]][:, None, :]
                 q = groups[h][row_of[b[chunk]]] + pos[b[chunk]][:, None, :]
-                depth[chunk] = np.minimum(_edge_depth(p, q), _edge_depth(q, p))
+                depth[chunk] = penetration_depth(p, q)
     return depth
+
+
+def penetration_depth(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``(P,)`` depth (m) of each pair of convex outlines over both outlines' edge normals.
+
+    Args:
+        p, q: ``(P, n, 2)`` and ``(P, m, 2)`` counter-clockwise outlines in the world, m.
+
+    Returns:
+        Positive: the pair overlaps by that much along its least-penetration edge normal (the
+        batched ``geometry.min_penetration_axis``). Zero or negative: an edge line separates
+        the pair, and minus the value is the widest gap along an edge normal (a lower bound
+        of the distance between them).
+    """
+    return np.minimum(_edge_depth(p, q), _edge_depth(q, p))
 
 
 def _edge_depth(p: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -1,0 +1,330 @@
+"""``taichi-ice bench``: DEM throughput, contacts, memory and the bandwidth bound, against Box2D.
+
+A box of the paper's diamonds (``scenes``) at each size and precision, each in a fresh
+process (``engine``): body-steps per second, simulated body-seconds per wall second,
+contacts per block, Taichi field bytes per block, the process RSS, and how close the step
+comes to the memory-bandwidth bound. With ``pyb2d3`` installed (``pip install
+'taichi-ice[bench]'``), the same scene also runs in Box2D v3 (``box2d``) in the same worker,
+and each row gets both engines' figures and their ratio. Outputs (``report``):
+``<name>.csv``, ``<name>.json`` and ``<name>.png`` in ``--out``.
+
+    taichi-ice bench --out out/bench                        # 1e3, 1e4, 1e5; f64 and f32
+    taichi-ice bench --sizes 1e3 1e4 1e5 1e6 --precision f64 --steps 50
+    taichi-ice bench --sizes 200 --steps 5 --no-box2d --out /tmp/bench   # smoke run
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib.metadata
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from ..errors import TaichiIceError
+from . import box2d, report
+from .scenes import SCENES, check_size
+
+__all__ = ["add_options", "bench_command"]
+
+DEFAULT_SIZES = (1_000, 10_000, 100_000)
+DEFAULT_STEPS = 100
+QUICK_STEPS = 20
+# Copy size for the bandwidth measurement (MB): well beyond the last-level cache.
+BANDWIDTH_MB = 256
+QUICK_BANDWIDTH_MB = 64
+
+
+def _size(text: str) -> int:
+    """``--sizes``: a whole number of blocks, 1 or more, also written as 1e5."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not (value >= 1 and value == int(value)):
+        raise argparse.ArgumentTypeError(f"{text!r}: use a whole number of blocks, e.g. 1e4")
+    return int(value)
+
+
+def _steps(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: use a whole number of steps, 1 or more")
+    return value
+
+
+def add_options(p: argparse.ArgumentParser) -> None:
+    """The options of ``taichi-ice bench`` (and of ``benchmarks/rubble_field.py``)."""
+    p.add_argument(
+        "--sizes",
+        type=_size,
+        nargs="+",
+        default=None,
+        help="numbers of blocks, 1e3 to 1e6 (default 1e3 1e4 1e5)",
+    )
+    p.add_argument(
+        "--precision",
+        nargs="+",
+        choices=("f64", "f32"),
+        default=["f64", "f32"],
+        help="one run per size in each (default both)",
+    )
+    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
+    p.add_argument("--law", default="coulomb", choices=("coulomb", "rate-state"))
+    p.add_argument("--water", action="store_true", help="add water drag")
+    p.add_argument(
+        "--steps",
+        type=_steps,
+        default=None,
+        help=f"timed steps per size, for each engine (default {DEFAULT_STEPS})",
+    )
+    p.add_argument(
+        "--scene",
+        default="random",
+        choices=SCENES,
+        help="random: diamonds at random angles, 55 %% of the box (default); lattice: "
+        "zig-zag columns of touching diamonds, 54 %%",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seeds the placement and the velocities")
+    p.add_argument("--out", type=Path, default=Path("out/bench"), help="results folder")
+    p.add_argument("--name", default="bench", help="file name of the outputs (default bench)")
+    p.add_argument(
+        "--box2d",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run the scene in Box2D v3 (pyb2d3) and report the ratio (default: on, "
+        "when pyb2d3 is installed)",
+    )
+    p.add_argument(
+        "--box2d-dt",
+        type=float,
+        default=box2d.DEFAULT_DT,
+        help=f"Box2D's time step, s (default {box2d.DEFAULT_DT:g})",
+    )
+    p.add_argument(
+        "--box2d-substeps",
+        type=_steps,
+        default=box2d.DEFAULT_SUBSTEPS,
+        help=f"Box2D's sub-steps per step (default {box2d.DEFAULT_SUBSTEPS})",
+    )
+    p.add_argument(
+        "--box2d-threads",
+        type=int,
+        nargs="+",
+        default=list(box2d.DEFAULT_THREADS),
+        help="Box2D's worker threads, one run each; the fastest is compared (default "
+        f"{' '.join(map(str, box2d.DEFAULT_THREADS))}; 0: no task system)",
+    )
+    p.add_argument(
+        "--threads", type=int, default=None, help="CPU threads for Taichi (default: every core)"
+    )
+    p.add_argument(
+        "--warm-cache",
+        action="store_true",
+        help="use Taichi's offline kernel cache (default: compile from scratch, so that "
+        "first_step_s shows the compile time)",
+    )
+    p.add_argument(
+        "--profile",
+        action="store_true",
+        help="also count Taichi's offloaded tasks (device launches) per step",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"smoke run: 1e3 blocks, {QUICK_STEPS} steps, a smaller bandwidth copy",
+    )
+
+
+def bench_command(args: argparse.Namespace) -> int:
+    """Run the benchmark that ``args`` (``add_options``) describes; 1 if a size failed."""
+    sizes = args.sizes or ([1_000] if args.quick else list(DEFAULT_SIZES))
+    steps = args.steps or (QUICK_STEPS if args.quick else DEFAULT_STEPS)
+    precisions = list(dict.fromkeys(args.precision))
+    for blocks in sizes:
+        try:
+            check_size(args.scene, blocks)
+        except ValueError as exc:
+            raise TaichiIceError(f"bench --sizes {blocks}: {exc}") from None
+    box2d_spec = None
+    if args.box2d:
+        if box2d.version() is None:
+            print(
+                "taichi-ice bench: pyb2d3 is not installed (pip install 'taichi-ice[bench]'): "
+                "running without Box2D",
+                file=sys.stderr,
+            )
+        else:
+            box2d_spec = {
+                "dt": args.box2d_dt,
+                "substeps": args.box2d_substeps,
+                "threads": args.box2d_threads,
+            }
+    common = {
+        "scene": args.scene,
+        "law": args.law,
+        "water": args.water,
+        "seed": args.seed,
+        "arch": args.arch,
+        "steps": steps,
+        "threads": args.threads,
+    }
+    print(
+        f"bench: {args.scene} box, {args.arch} {'/'.join(precisions)}, {args.law}"
+        f"{', water' if args.water else ''}, {steps} steps per size"
+        + (f", Box2D v3 {box2d.version()}" if box2d_spec else ""),
+        file=sys.stderr,
+    )
+    print("  memory bandwidth ...", end="", file=sys.stderr, flush=True)
+    copy_mb = QUICK_BANDWIDTH_MB if args.quick else BANDWIDTH_MB
+    spec = {"task": "bandwidth", "arch": args.arch, "precision": precisions[0], "copy_mb": copy_mb}
+    bandwidth = _worker(spec, args, cold_cache=True)
+    if "error" in bandwidth:
+        raise TaichiIceError(f"bench: the bandwidth measurement failed: {bandwidth['error']}")
+    peak_bw = max(bandwidth["numpy_copy_gb_s"], bandwidth["taichi_copy_gb_s"]) * 1e9
+    print(
+        f" NumPy copy {bandwidth['numpy_copy_gb_s']:.3g} GB/s (one thread), "
+        f"Taichi copy {bandwidth['taichi_copy_gb_s']:.3g} GB/s",
+        file=sys.stderr,
+    )
+
+    # The workers of a size share one placement of the random box.
+    with tempfile.TemporaryDirectory(prefix="taichi-ice-bench-") as placements:
+        common["cache"] = placements
+        rows, details, failed = _run_sizes(sizes, precisions, common, box2d_spec, args, peak_bw)
+
+    meta = _meta(args, precisions, steps, bandwidth, failed)
+    paths = report.write(args.out, args.name, rows, meta, details)
+    if rows:
+        report.print_table(rows)
+    print(f"wrote {', '.join(str(p) for p in paths)}", file=sys.stderr)
+    if failed:
+        print(
+            f"taichi-ice bench: {len(failed)} run(s) failed: "
+            + "; ".join(f"{f['blocks']} {f['precision']}: {f['error']}" for f in failed),
+            file=sys.stderr,
+        )
+        return 1
+    return 0
+
+
+def _run_sizes(sizes, precisions, common, box2d_spec, args, peak_bw):
+    """Every size in every precision, each in a worker: ``(rows, details, failed)``."""
+    rows: list[dict] = []
+    details: list[dict] = []
+    failed: list[dict] = []
+    for blocks in sizes:
+        first_row: dict | None = None
+        for precision in precisions:
+            # Box2D runs once per size, in the worker of the first precision that completes.
+            spec = {**common, "task": "size", "blocks": blocks, "precision": precision}
+            spec["box2d"] = box2d_spec if first_row is None else None
+            result = _worker(spec, args, cold_cache=not args.warm_cache)
+            if "error" in result:
+                print(f"  {blocks} blocks, {precision} FAILED: {result['error']}", file=sys.stderr)
+                failed.append({"blocks": blocks, "precision": precision, **result})
+                continue
+            row = result["row"]
+            _bound(row, result["details"], peak_bw)
+            if first_row is None:
+                first_row = row
+            elif box2d_spec:
+                row.update({k: v for k, v in first_row.items() if k.startswith("box2d_")})
+            if row.get("box2d_body_steps_per_s"):
+                row["steps_ratio"] = row["body_steps_per_s"] / row["box2d_body_steps_per_s"]
+                row["sim_time_ratio"] = row["body_s_per_s"] / row["box2d_body_s_per_s"]
+            rows.append(row)
+            details.append(result["details"])
+    return rows, details, failed
+
+
+def _bound(row: dict, details: dict, peak_bw: float) -> None:
+    """Add the memory-bandwidth bound of the step and of each kernel (``peak_bw`` B/s)."""
+    bound_s = row["bytes_per_step_mb"] * 2**20 / peak_bw
+    row["bandwidth_gb_s"] = peak_bw / 1e9
+    row["bandwidth_bound_ms"] = bound_s * 1e3
+    row["bandwidth_fraction"] = bound_s / (row["step_ms"] * 1e-3)
+    moved = details["traffic"]["bytes_per_kernel"]
+    details["kernel_bandwidth_fraction"] = {
+        name: moved[name] / peak_bw / (row[f"{name}_ms"] * 1e-3)
+        for name in moved
+        if row.get(f"{name}_ms")
+    }
+
+
+def _worker(spec: dict, args: argparse.Namespace, cold_cache: bool) -> dict:
+    """Run ``spec`` in a fresh interpreter (``engine.main``); its progress goes to stderr."""
+    env = dict(os.environ)
+    if args.threads:
+        env["TI_CPU_MAX_NUM_THREADS"] = str(args.threads)
+    if args.profile:
+        env["TI_KERNEL_PROFILER"] = "1"
+    with tempfile.TemporaryDirectory(prefix="ti-cache-") as cache:
+        if cold_cache:
+            env["TI_OFFLINE_CACHE_FILE_PATH"] = cache
+        cmd = [sys.executable, "-m", "taichi_ice.bench.engine", json.dumps(spec)]
+        done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True, check=False)
+    lines = done.stdout.strip().splitlines()
+    if done.returncode or not lines:
+        return {"error": f"the worker exited with status {done.returncode} (see above)"}
+    return json.loads(lines[-1])
+
+
+def _meta(args, precisions: list[str], steps: int, bandwidth: dict, failed: list) -> dict:
+    """What the JSON records about the run besides its rows."""
+    from .scenes import BLOCK_LENGTH, BLOCK_WIDTH
+
+    return {
+        "scene": args.scene,
+        "arch": args.arch,
+        "precisions": precisions,
+        "law": args.law,
+        "water": args.water,
+        "steps": steps,
+        "seed": args.seed,
+        "threads": args.threads or os.cpu_count(),
+        "cold_cache": not args.warm_cache,
+        "machine": platform.node(),
+        "cpu": _cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "taichi": importlib.metadata.version("taichi"),
+        "numpy": importlib.metadata.version("numpy"),
+        "pyb2d3": box2d.version() if args.box2d else None,
+        "git": _git_state(),
+        "block": {"shape": "diamond", "width": BLOCK_WIDTH, "length": BLOCK_LENGTH},
+        "bandwidth": bandwidth,
+        "failed": failed,
+    }
+
+
+def _cpu_model() -> str:
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor()
+
+
+def _git_state() -> str | None:
+    """``git describe --always --dirty`` of the package's checkout, if it is one."""
+    with contextlib.suppress(OSError, subprocess.SubprocessError):
+        done = subprocess.run(
+            ["git", "describe", "--always", "--dirty"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+        if done.returncode == 0:
+            return done.stdout.strip()
+    return None

@@ -1,0 +1,60 @@
+"""Memory and traffic of a World: field bytes, process RSS, bytes a step must move.
+
+The traffic model is the stages' own declarations (``taichi_ice.schema``): every field a
+kernel reads or writes, counted once per launch, so the bound it gives is optimistic.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import resource
+import sys
+
+__all__ = ["STEP_STAGES", "field_bytes", "rss_bytes", "traffic"]
+
+# The stages whose kernels make up a step, by the name their times are reported under.
+STEP_STAGES = ("hash", "contacts", "integrator")
+
+
+def field_bytes(world) -> dict[str, int]:
+    """Bytes of the World's Taichi fields, per group (model, data, hash), from the schema."""
+    from .. import schema
+
+    sizes = schema.field_bytes(world.layout)
+    return {group: sum(sizes[v.name] for v in decls) for group, decls in schema.groups().items()}
+
+
+def traffic(world, contacts: float) -> dict:
+    """Bytes per step the kernels of a step must move with ``contacts`` contacts per step.
+
+    Returns:
+        ``bytes_per_step``, ``bytes_per_kernel`` (``{"stage.kernel": bytes}``), and the split
+        into ``bytes_per_body`` and ``bytes_per_contact``.
+    """
+    from .. import schema
+    from ..world import STAGES
+
+    stages = {name: STAGES[name] for name in STEP_STAGES if name in STAGES}
+    per_kernel = schema.traffic(stages, world.layout, contacts)
+    total = per_kernel.pop("total")
+    no_contacts = schema.traffic(stages, world.layout, 0.0)["total"]
+    one_contact = schema.traffic(stages, world.layout, 1.0)["total"]
+    return {
+        "bytes_per_step": total,
+        "bytes_per_kernel": per_kernel,
+        "bytes_per_body": no_contacts / world.layout.n_bodies,
+        "bytes_per_contact": one_contact - no_contacts,
+    }
+
+
+def rss_bytes() -> tuple[int, int]:
+    """Current and peak resident set size of this process (bytes)."""
+    current = 0
+    with contextlib.suppress(OSError):
+        with open("/proc/self/statm") as fh:
+            current = int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    # ru_maxrss is in KiB on Linux (bytes on macOS).
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    peak *= 1 if sys.platform == "darwin" else 1024
+    return current, peak

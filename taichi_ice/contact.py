@@ -256,13 +256,14 @@ class ContactStage(Stage):
     def outline(self, i, origin):
         """Body i's outline relative to ``origin`` in a (MAXV, 2) matrix, and its count.
 
-        Clipping near the pair rather than in world coordinates keeps float32 accurate in
-        large fields: its resolution then scales with the bodies' size, not the domain's.
+        Positions are float64 in either precision and only their difference is cast to
+        the run's precision: clipping near the pair keeps float32 accurate in large fields,
+        its resolution scaling with the bodies' size, not the domain's.
         The turned outline is the integrator's (``vert_turned``), once per body per step.
         """
         m, d = ti.static((self.model, self.data))
         p = ti.Matrix.zero(self.layout.real, self.maxv, 2)
-        x = d.body_pos[i] - origin
+        x = ti.cast(d.body_pos[i] - origin, self.layout.real)  # positions are f64
         start, count = m.body_vert_start[i], m.body_vert_count[i]
         for k in range(count):
             v = d.vert_turned[start + k]
@@ -303,7 +304,8 @@ class ContactStage(Stage):
                     crushed = d.contact_crushed[cur, i, found]
                 if ti.static(self.layout.rate_state):
                     theta = d.contact_theta[cur, i, found]
-            r_i, r_j = point, point + (xi_ - xj_)  # point is relative to body i
+            # point is relative to body i
+            r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)
             v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
                 d.body_vel[i] + perp(d.body_omega[i], r_i)
             )

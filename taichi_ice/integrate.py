@@ -129,7 +129,7 @@ class Integrator(Stage):
             d.body_energy[i, BodyEnergy.WORK] += ti.cast(f_ext.dot(vm) * dt, ti.f64)
             d.body_vel[i] = v1
             d.body_omega[i] = w1
-            d.body_pos[i] += dt * v1
+            d.body_pos[i] += ti.cast(dt * v1, ti.f64)
             d.body_angle[i] += dt * w1
             self.turn(i)
             speed2 = v1.norm_sqr()
@@ -141,7 +141,7 @@ class Integrator(Stage):
             # The contact force f acts on the pusher; the pusher does -f.v on the rest.
             v, w = d.body_vel[i], d.body_omega[i]
             d.body_energy[i, BodyEnergy.WORK] += ti.cast(-(f.dot(v) + tau * w) * dt, ti.f64)
-            d.body_pos[i] += dt * v
+            d.body_pos[i] += ti.cast(dt * v, ti.f64)
             d.body_angle[i] += dt * w
             if w != 0.0:
                 self.turn(i)

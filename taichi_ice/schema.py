@@ -190,7 +190,7 @@ MODEL: tuple[Var, ...] = (
 
 # Mutable (MuJoCo Warp's Data).
 DATA: tuple[Var, ...] = (
-    Var("body_pos", "real", ("n_bodies",), "m", "centroid position", lanes=2, init=HOST),
+    Var("body_pos", "f64", ("n_bodies",), "m", "centroid position (f64 in either precision: a block far from the origin keeps its resolution; contacts work in the run's precision relative to the owner)", lanes=2, init=HOST),
     Var("body_angle", "real", ("n_bodies",), "rad", "orientation, counter-clockwise", init=HOST),
     Var("body_vel", "real", ("n_bodies",), "m/s", "centroid velocity", lanes=2, init=HOST),
     Var("body_omega", "real", ("n_bodies",), "rad/s", "angular velocity", init=HOST),
@@ -226,7 +226,7 @@ HASH: tuple[Var, ...] = (
 NEIGHBOURS: tuple[Var, ...] = (
     Var("nbr_ids", "i32", ("n_bodies", "nbr_len"), "id", "partners a body owns whose bounding circles come within the skin, ascending"),
     Var("nbr_count", "i32", ("n_bodies",), "", "entries of each body's list"),
-    Var("nbr_ref_pos", "real", ("n_bodies",), "m", "centroid when the list was built", lanes=2),
+    Var("nbr_ref_pos", "f64", ("n_bodies",), "m", "centroid when the list was built", lanes=2),
     Var("nbr_ref_angle", "real", ("n_bodies",), "rad", "angle when the list was built"),
     Var("world_nbr_stale", "i32", ("n_worlds",), "", "1 if the world's lists must be rebuilt before its next step", init=1),
 )

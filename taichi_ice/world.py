@@ -159,7 +159,7 @@ class World:
         n = self.layout.n_bodies
         pos = self.data.body_pos.to_numpy()
         ang = self.data.body_angle.to_numpy()
-        pos[:n] = np.asarray(positions, dtype=real).reshape(n, 2)
+        pos[:n] = np.asarray(positions, dtype=np.float64).reshape(n, 2)
         ang[:n] = np.asarray(angles, dtype=real).reshape(n)
         self.data.body_pos.from_numpy(pos)
         self.data.body_angle.from_numpy(ang)

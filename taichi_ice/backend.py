@@ -35,6 +35,11 @@ def real_dtype(precision: str):
     return np.float64 if precision == "f64" else np.float32
 
 
+def current_arch():
+    """The arch Taichi was started on by ``init`` ('cpu', 'gpu', ...), or None."""
+    return None if _current is None else _current[0]
+
+
 def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> None:
     """Start Taichi on ``arch`` with ``precision`` as its default float type.
 

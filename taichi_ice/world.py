@@ -38,9 +38,15 @@ STAGES = {
     "stepper": WorldStepper,
 }
 
-# "auto" steps worlds of up to this many bodies one thread per world (many steps per launch),
-# larger ones in parallel over bodies (benchmarks/small_scene.py measured the crossover).
-PER_WORLD_MAX_BODIES = 2000
+# "auto" on the CPU steps worlds of up to this many bodies one thread per world (many steps
+# per launch), larger ones in parallel over bodies. Measured on the 2-core VM, random box of
+# the paper's diamonds, one world: a thread per world 1.2-1.4 M body-steps/s at 300, 1e3 and
+# 3e3 blocks against 0.4, 0.6-0.7 and 0.9 M in parallel over bodies; about equal at 1e4,
+# where rebuilding the lists (all pairs of the world) starts to cost.
+PER_WORLD_MAX_BODIES = 4000
+# On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
+# "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
+GPU_MIN_WORLDS = 1024
 STEPPINGS = ("auto", "worlds", "bodies")
 
 
@@ -55,7 +61,8 @@ class World:
         force_dt: accept a dt above the stability limit.
         stepping: "worlds" (one thread per world, many steps per launch: small worlds),
             "bodies" (parallel over bodies, three launches per step: large worlds) or
-            "auto" (worlds if no world has more than ``PER_WORLD_MAX_BODIES`` bodies).
+            "auto" (worlds if no world has more than ``PER_WORLD_MAX_BODIES`` bodies, and on
+            a GPU only for ``GPU_MIN_WORLDS`` worlds or more).
     """
 
     def __init__(
@@ -82,7 +89,10 @@ class World:
 
         if stepping == "auto":
             largest = int(np.diff(self.host.world_body_start).max(initial=0))
-            stepping = "worlds" if largest <= PER_WORLD_MAX_BODIES else "bodies"
+            small = largest <= PER_WORLD_MAX_BODIES
+            if backend.current_arch() not in (None, "cpu"):
+                small = small and len(self.scenes) >= GPU_MIN_WORLDS
+            stepping = "worlds" if small else "bodies"
         self.stepping = stepping
 
         self.hash = SpatialHash(self.layout, self.model, self.data)

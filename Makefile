@@ -19,7 +19,7 @@ run: $(STAMP)
 	$(BIN)/taichi-ice paper --out $(OUT)/paper
 
 validate: $(STAMP)
-	$(BIN)/taichi-ice validate --out $(OUT)/validation
+	$(BIN)/taichi-ice validate --dem --out $(OUT)/validation
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -21,7 +21,9 @@ EXAMPLES = {
   taichi-ice run scenarios/two_squares.toml --friction coulomb:0.3 --dt 5e-5 --precision f32""",
     "validate": """examples:
   taichi-ice validate --out out/validation          # Figure 3, exact solutions, stability
-  taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)""",
+  taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)
+  taichi-ice validate --out out/validation --dem    # + the DEM's accuracy against cost and
+                                                    #   its stability limits (~11 minutes)""",
     "paper": """examples:
   taichi-ice paper --out out/paper                  # Figures 3-6, budget, spread over 16 layouts,
                                                     # variants of the law, ice strength
@@ -107,7 +109,7 @@ def _cmd_run(args) -> int:
 def _cmd_validate(args) -> int:
     from .studies import validate_command
 
-    return validate_command(args.out, speed=args.speed, quick=args.quick)
+    return validate_command(args.out, speed=args.speed, quick=args.quick, dem=args.dem)
 
 
 def _cmd_paper(args) -> int:
@@ -236,6 +238,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", default="out/validation", help="output folder")
     p.add_argument("--speed", action="store_true", help="also chart speed against accuracy")
+    p.add_argument(
+        "--dem",
+        action="store_true",
+        help="also chart the DEM's error against cost (collisions, pushed box, pillar scene) "
+        "and find the largest stable dt of each scene",
+    )
     p.add_argument("--quick", action="store_true", help="small sizes (for tests)")
 
     p = add(

@@ -11,6 +11,11 @@
   and implicit stay bounded.
 - ``speed_accuracy``: error against time step and against wall time for every method, in
   float64 and float32, NumPy and Taichi, with measured convergence orders.
+- ``dem_accuracy`` (``--dem``): the DEM's error against cost over time steps from well below
+  to beyond the stability limit, float64 and float32, Coulomb and rate-and-state (collisions
+  against an ODE, the pushed box's energy budget, the pillar scene against a run at a quarter
+  of the step, when chaotic runs part), and the largest step each scene survives
+  (``dem_stability``), with the recommended ``dt_safety``.
 """
 
 from __future__ import annotations
@@ -21,13 +26,14 @@ from pathlib import Path
 __all__ = ["validate_command"]
 
 
-def validate_command(out: str, speed: bool = False, quick: bool = False) -> int:
+def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bool = False) -> int:
     """Run the validation studies into ``out``; the body of ``taichi-ice validate``.
 
     Args:
         out: output folder (created if missing).
         speed: also run the speed/accuracy study (a few minutes at 1e6 interfaces).
         quick: smaller sizes, for tests and smoke runs.
+        dem: also run the DEM accuracy and stability study (~11 minutes on 2 cores).
 
     Returns:
         Process exit code: 0.
@@ -45,5 +51,9 @@ def validate_command(out: str, speed: bool = False, quick: bool = False) -> int:
         from . import speed_accuracy
 
         speed_accuracy.run(out_dir, quick=quick)
+    if dem:
+        from . import dem_accuracy
+
+        dem_accuracy.run(out_dir, quick=quick)
     print(f"validate: done in {time.perf_counter() - start:.1f} s; results in {out_dir}/")
     return 0

@@ -1,0 +1,321 @@
+"""Charts of the DEM accuracy study: error against cost, and parting runs with the limits.
+
+``plot_accuracy``: one panel per measure (``dem_analysis.MEASURES``), error against wall time
+per simulated second; colour is the law, solid float64 and dashed float32, filled markers
+at or below the computed stability limit and open ones beyond it, a ring at the default step
+(0.2 stable_dt); runs that diverged are crosses on the top edge. Along a line the step grows
+from left to right (the cost falls as 1 / dt); labels give dt / stable_dt.
+
+``plot_stability``: (a) the largest distance between the same block in two runs of the
+pillar scene over time: runs that differ in the last bit of one position, and runs at a step
+and a quarter of it; (b) each stability trial at its dt / stable_dt, survived or diverged,
+with the computed limit (1), the default and the recommended dt_safety.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .dem_analysis import MEASURES, PART
+
+COLORS = {"coulomb": "C0", "rate-state": "C3"}
+STYLES = {"f64": "-", "f32": "--"}
+UNITS = {"positions": "largest block displacement (m)"}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
+    plt = _plt()
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import NullFormatter
+
+    panels = [(s, m) for s, ms in MEASURES.items() for m in ms]
+    fig, axes = plt.subplots(3, 3, figsize=(14, 11.5), constrained_layout=True)
+    points = summary["points"]
+    for ax, (scene, measure) in zip(axes.flat, panels):
+        mine = [p for p in points if p["scene"] == scene and p["measure"] == measure]
+        top = max([p["error"] for p in mine if p["error"]] or [1.0]) * 3.0
+        for law in COLORS:
+            for prec in STYLES:
+                line = sorted(
+                    (
+                        p
+                        for p in mine
+                        if p["law"] == law and p["precision"] == prec and p["wall_per_simulated_s"]
+                    ),
+                    key=lambda p: p["ratio"],
+                )
+                ok = [p for p in line if p["error"] is not None and p["error"] > 0]
+                if not line:
+                    continue
+                x = [p["wall_per_simulated_s"] for p in ok]
+                y = [p["error"] for p in ok]
+                color, ls = COLORS[law], STYLES[prec]
+                ax.loglog(x, y, ls=ls, color=color, lw=1.0)
+                for p in ok:
+                    beyond = p["ratio"] > 1.0
+                    ax.plot(
+                        p["wall_per_simulated_s"],
+                        p["error"],
+                        "o",
+                        ms=4,
+                        color=color,
+                        mfc="none" if beyond else color,
+                    )
+                    if abs(p["ratio"] / 0.2 - 1.0) < 0.05:
+                        ax.plot(
+                            p["wall_per_simulated_s"],
+                            p["error"],
+                            "o",
+                            ms=9,
+                            mfc="none",
+                            color="k",
+                            lw=0.8,
+                        )
+                for p in line:
+                    if p["error"] is None:
+                        ax.plot(p["wall_per_simulated_s"], top, "x", color=color, ms=6)
+                if law == "coulomb" and prec == "f64":
+                    for p in ok:
+                        ax.annotate(
+                            f"{p['ratio']:.2g}",
+                            (p["wall_per_simulated_s"], p["error"]),
+                            textcoords="offset points",
+                            xytext=(2, -9),
+                            fontsize=6,
+                            color="0.35",
+                        )
+        ax.set_title(f"{scene}: {measure}", fontsize=10)
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("wall time per simulated second (s), one world alone")
+        ax.set_ylabel(UNITS.get(measure, "relative error"))
+        ax.grid(True, which="major", alpha=0.3)
+    handles = [Line2D([], [], color=c, label=law) for law, c in COLORS.items()]
+    handles += [Line2D([], [], color="k", ls=s, label=p) for p, s in STYLES.items()]
+    handles += [
+        Line2D([], [], color="k", marker="o", ls="none", label="dt <= stable_dt"),
+        Line2D([], [], color="k", marker="o", mfc="none", ls="none", label="dt > stable_dt"),
+        Line2D([], [], color="k", marker="o", ms=9, mfc="none", ls="none", label="dt = 0.2 stable"),
+        Line2D([], [], color="k", marker="x", ls="none", label="diverged"),
+    ]
+    axes.flat[0].legend(handles=handles, fontsize=7, loc="lower left", ncol=2)
+    windows = ", ".join(
+        f"{law} {v['window_s']:.3g} s" for law, v in summary.get("pillar_reference", {}).items()
+    )
+    fig.suptitle(
+        "DEM accuracy against cost (labels: dt / stable_dt). Collisions against the ODE of the "
+        "contact law; pushed box: energy budget residual;\npillar scene: against dt = 0.05 "
+        f"stable_dt (a quarter of the default step) until the default step's run parts ({windows})",
+        fontsize=11,
+    )
+    fig.savefig(path, dpi=75)
+    plt.close(fig)
+
+
+def plot_stability(summary: dict[str, Any], path: Path) -> None:
+    plt = _plt()
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 4.8), constrained_layout=True)
+    for law, c in summary.get("chaos", {}).items():
+        gap = np.maximum(np.asarray(c["largest_gap_m"]), 1e-17)
+        ax.semilogy(
+            c["time"],
+            gap,
+            color=COLORS[law],
+            lw=1.4,
+            label=f"{law}: last bit of one x (dt = {c['ratio']:.2g} stable)",
+        )
+    for pair in summary.get("pillar_parting_at_a_quarter_step", []):
+        if pair["precision"] != "f64" or "time" not in pair:
+            continue
+        ax.semilogy(
+            pair["time"],
+            np.maximum(pair["largest_gap_m"], 1e-17),
+            ls="--",
+            color=COLORS[pair["law"]],
+            alpha=0.5,
+            lw=0.9,
+            label=f"{pair['law']}: dt = {pair['ratio']:.2g} vs a quarter",
+        )
+    ax.axhline(PART, color="0.5", lw=0.8)
+    ax.text(0.2, PART * 1.5, f"parted ({PART * 100:g} cm)", fontsize=8, color="0.3")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("largest distance between a block and its twin (m)")
+    ax.set_title("(a) pillar scene: when do two runs part?")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, loc="lower right")
+    stability = summary.get("stability", {})
+    rec = summary.get("recommendation", {})
+    for row, res in enumerate(stability.values()):
+        for t in res["trials"]:
+            ax2.plot(
+                t["ratio"],
+                row,
+                "o" if t["survived"] else "x",
+                color="C2" if t["survived"] else "C3",
+                ms=7,
+            )
+        lo = res["largest_surviving_ratio"]
+        if lo:
+            ax2.text(lo, row + 0.18, f"{lo:.2f}", fontsize=8, ha="center")
+    ax2.set_yticks(range(len(stability)))
+    ax2.set_yticklabels(list(stability))
+    ax2.set_ylim(-0.6, len(stability) - 0.4)
+    ax2.set_xlim(0.15, 4.0)
+    ax2.set_xscale("log")
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    ax2.xaxis.set_major_formatter(ScalarFormatter())
+    ax2.xaxis.set_minor_formatter(NullFormatter())
+    ax2.set_xticks([0.2, 0.5, 1.0, 2.0, 3.0])
+    ax2.axvline(1.0, color="k", lw=0.8)
+    ax2.text(1.02, -0.5, "computed limit", fontsize=8)
+    ax2.axvline(0.2, color="0.5", ls=":", lw=1.0)
+    ax2.text(0.205, -0.5, "default 0.2", fontsize=8, color="0.3")
+    if rec.get("dt_safety"):
+        ax2.axvline(rec["dt_safety"], color="C2", ls="--", lw=1.0)
+        ax2.text(
+            rec["dt_safety"] * 1.02,
+            len(stability) - 0.55,
+            f"recommended {rec['dt_safety']:g}",
+            fontsize=8,
+            color="C2",
+        )
+    ax2.set_xlabel("dt / stable_dt (o survived, x diverged)")
+    ax2.set_title("(b) the largest step each scene survives")
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+# Columns of the error table: the nominal steps (the field scenes' dt is SAMPLE / n, a few
+# per cent below the nominal; the JSON has the exact ratios).
+NOMINAL = (0.0125, 0.025, 0.05, 0.1, 0.2, 0.4, 0.8, 1.2, 1.6)
+
+
+def _nominal(ratio: float) -> float:
+    return min(NOMINAL, key=lambda n: abs(np.log(ratio / n)))
+
+
+def _fmt(x, spec: str = ".2g") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def tables(summary: dict[str, Any]) -> str:
+    """The study's numbers as Markdown: errors by step, orders, costs, parting, limits."""
+    points = summary["points"]
+    out = []
+    ratios = sorted({_nominal(p["ratio"]) for p in points})
+    rows = sorted({(p["scene"], p["measure"], p["law"], p["precision"]) for p in points})
+    out.append(
+        "Error (relative; positions in m) against dt / stable_dt, nominal (- : not run; "
+        "stopped: the run diverged before the comparison's end):\n"
+    )
+    out.append(
+        "| scene: measure | law | precision | " + " | ".join(f"{r:g}" for r in ratios) + " |"
+    )
+    out.append("|---|---|---|" + "---:|" * len(ratios))
+    for scene, measure, law, prec in rows:
+        by = {
+            _nominal(p["ratio"]): p
+            for p in points
+            if (p["scene"], p["measure"], p["law"], p["precision"]) == (scene, measure, law, prec)
+        }
+        cells = []
+        for r in ratios:
+            p = by.get(r)
+            cells.append(
+                "-" if p is None else ("stopped" if p["error"] is None else _fmt(p["error"]))
+            )
+        out.append(f"| {scene}: {measure} | {law} | {prec} | " + " | ".join(cells) + " |")
+    out.append("\nConvergence order (float64; scatter in decades; '(no)': not converging):\n")
+    out.append("| scene: measure | coulomb | rate-state |")
+    out.append("|---|---:|---:|")
+    orders = summary["orders"]
+    for scene, ms in MEASURES.items():
+        for m in ms:
+            cells = []
+            for law in ("coulomb", "rate-state"):
+                fit = orders.get(f"{scene}: {m}/{law}/f64")
+                cells.append(
+                    "-"
+                    if not fit
+                    else f"{fit['order']:.2f} ({fit['scatter_decades']:.2f})"
+                    + ("" if fit["converges"] else " (no)")
+                )
+            out.append(f"| {scene}: {m} | " + " | ".join(cells) + " |")
+    out.append(
+        "\nCost: wall time per step of one world alone (us), and per simulated second "
+        "at dt = 0.2 stable_dt (s):\n"
+    )
+    out.append("| scene | law | precision | us per step | s per simulated s at 0.2 |")
+    out.append("|---|---|---|---:|---:|")
+    stable = summary["settings"]["stable_dt"]
+    for key, t in summary["timing"].items():
+        scene, law, prec = key.split("/")
+        sdt = stable["collisions"] if scene == "collision" else stable["pillar, pushed box"]
+        out.append(
+            f"| {scene} | {law} | {prec} | {t['wall_per_step_s'] * 1e6:.0f} | "
+            f"{t['wall_per_step_s'] / (0.2 * sdt):.2f} |"
+        )
+    out.append("\nWhen two runs of the pillar scene part (a block 1 cm from its twin), s:\n")
+    out.append("| runs | law | precision | parted at | compared until |")
+    out.append("|---|---|---|---:|---:|")
+    for p in summary["pillar_parting_at_a_quarter_step"]:
+        out.append(
+            f"| {p['ratio']:.2g} against {p['quarter']:.2g} stable_dt | {p['law']} | "
+            f"{p['precision']} | {_fmt(p['parted_at'], '.1f')} | {p['until']:g} |"
+        )
+    for law, c in summary["chaos"].items():
+        out.append(
+            f"| the last bit of one x, at {c['ratio']:.2g} stable_dt | {law} | f64 | "
+            f"{_fmt(c['parted_at'], '.1f')} (1e-9 m at {_fmt(c['departed_at'], '.1f')}) "
+            f"| {c['until']:g} |"
+        )
+    stability = summary.get("stability")
+    if stability:
+        out.append(
+            "\nThe largest dt / stable_dt each scene survives (bisection; the energy the "
+            "bodies hold over what came in, at the last survivor):\n"
+        )
+        out.append("| scene | survives | stops | held / in at the survivor |")
+        out.append("|---|---:|---:|---:|")
+        for name, res in stability.items():
+            lo = res["largest_surviving_ratio"]
+            held = next(
+                (
+                    t.get("held_over_energy_in")
+                    for t in res["trials"]
+                    if t["survived"] and t["ratio"] == lo
+                ),
+                None,
+            )
+            out.append(
+                f"| {name} | {_fmt(lo, '.3f')} | {_fmt(res['smallest_failing_ratio'], '.3f')}"
+                f" | {_fmt(held, '.2f')} |"
+            )
+    rec = summary.get("recommendation")
+    if rec:
+        out.append(f"\nRecommended `dt_safety`: **{rec['dt_safety']}** ({rec['rule']}).\n")
+        names = list(next(iter(rec["candidates"].values()))["errors"])
+        out.append("| dt_safety | margin in the jam | " + " | ".join(names) + " |")
+        out.append("|---:|---:|" + "---:|" * len(names))
+        for s, c in rec["candidates"].items():
+            out.append(
+                f"| {s} | {_fmt(c['margin'].get('jam'), '.1f')} | "
+                + " | ".join(_fmt(c["errors"][n]) for n in names)
+                + " |"
+            )
+    return "\n".join(out) + "\n"
+
+
+__all__ = ["plot_accuracy", "plot_stability", "tables"]

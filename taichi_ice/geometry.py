@@ -418,31 +418,32 @@ def min_penetration_axis_ti(p, n_p, q, n_q):
     depth = 0.0
     axis = ti.math.vec2(0.0, 0.0)
     for k in range(n_p):
-        a = _row(p, k)
-        e = _row(p, (k + 1) % n_p) - a
-        n = ti.math.vec2(e[1], -e[0]).normalized()
-        lowest = ti.math.dot(n, _row(q, 0) - a)
-        for j in range(1, n_q):
-            lowest = ti.min(lowest, ti.math.dot(n, _row(q, j) - a))
-        if k == 0 or -lowest < depth:
-            depth = -lowest
-            axis = n
+        d, n = _edge_penetration_ti(p, n_p, q, n_q, k)
+        if k == 0 or d < depth:
+            depth, axis = d, n
         if depth <= 0.0:
             break
     if depth > 0.0:
         for k in range(n_q):
-            a = _row(q, k)
-            e = _row(q, (k + 1) % n_q) - a
-            n = ti.math.vec2(e[1], -e[0]).normalized()
-            lowest = ti.math.dot(n, _row(p, 0) - a)
-            for j in range(1, n_p):
-                lowest = ti.min(lowest, ti.math.dot(n, _row(p, j) - a))
-            if -lowest < depth:
-                depth = -lowest
-                axis = -n
+            d, n = _edge_penetration_ti(q, n_q, p, n_p, k)
+            if d < depth:
+                depth, axis = d, -n
             if depth <= 0.0:
                 break
     return depth, axis
+
+
+@ti.func
+def _edge_penetration_ti(own, n_own, other, n_other, k):
+    """How far ``other`` reaches past edge ``k`` of ``own`` along its outward unit normal
+    (m; <= 0: that edge's line separates them), and the normal."""
+    a = _row(own, k)
+    e = _row(own, (k + 1) % n_own) - a
+    n = ti.math.vec2(e[1], -e[0]).normalized()
+    lowest = ti.math.dot(n, _row(other, 0) - a)
+    for j in range(1, n_other):
+        lowest = ti.min(lowest, ti.math.dot(n, _row(other, j) - a))
+    return -lowest, n
 
 
 @ti.func

@@ -2,8 +2,9 @@
 
 - The NumPy twin of a whole step (``taichi_ice.reference``) on seeded random small scenes.
 - Closed forms and SciPy: a face-on collision is a damped linear oscillator with a no-tension
-  clamp (``solve_ivp``); a block pressed onto a floor obeys Coulomb's law; a contact sliding
-  at constant speed carries the rate-and-state steady state ``mu0 + (A - B) ln(V / V*)``.
+  clamp (scipy's ``solve_ivp``, in ``studies.collision_ode``); a block pressed onto a floor
+  obeys Coulomb's law; a contact sliding at constant speed carries the rate-and-state
+  steady state ``mu0 + (A - B) ln(V / V*)``.
 - Conservation and symmetry: momentum and angular momentum of a free field, an energy
   budget that closes and converges with dt, a rotated and translated scene, worlds that run
   the same alone or batched.
@@ -17,7 +18,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from taichi_ice import DivergenceError, Simulation, StabilityError, load_scenario
 from taichi_ice.budget import residual as energy_residual
@@ -32,6 +32,7 @@ from taichi_ice.reference import (
     reference_step,
 )
 from taichi_ice.scenario import scene_from_dict
+from taichi_ice.studies.collision_ode import clamped_oscillator
 from taichi_ice.world import World
 
 # The kernels and the NumPy twin do the same float64 operations in the same order; a force
@@ -242,30 +243,6 @@ def test_world_matches_numpy_reference_step(f64, law, water):
 # --------------------------------------------------------------------------------------------
 # Closed forms
 # --------------------------------------------------------------------------------------------
-
-
-def clamped_oscillator(k: float, c: float, m_eff: float, v0: float) -> tuple[float, float]:
-    """Duration (s) and restitution of m d'' = -max(k d + c d', 0), d(0) = 0, d'(0) = v0."""
-
-    def rhs(_t, y):
-        return [y[1], -max(k * y[0] + c * y[1], 0.0) / m_eff]
-
-    def apart(_t, y):
-        return y[0]
-
-    apart.terminal = True
-    apart.direction = -1
-    sol = solve_ivp(
-        rhs,
-        (0.0, 1.0),
-        [0.0, v0],
-        events=apart,
-        method="DOP853",
-        rtol=1e-12,
-        atol=1e-16,
-        first_step=1e-9,
-    )
-    return float(sol.t_events[0][0]), float(-sol.y_events[0][0][1] / v0)
 
 
 def collide(scene, dt: float, run_opts: dict) -> tuple[float, float, np.ndarray]:

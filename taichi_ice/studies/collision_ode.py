@@ -340,13 +340,13 @@ def solve_collision(scene, t_end: float) -> dict[str, Any]:
 
 
 def clamped_oscillator(k: float, c: float, m_eff: float, v0: float) -> tuple[float, float]:
-    """Closed form of a face-on collision without the no-tension clamp, then the clamp's
-    correction by the same ODE: ``(duration, restitution)`` of ``m d'' = -max(k d + c d', 0)``
-    from ``d = 0, d' = v0`` until ``d`` returns to 0.
+    """``(duration (s), restitution)`` of a face-on collision, ``m d'' = -max(k d + c d', 0)``
+    from ``d = 0, d' = v0`` until ``d`` returns to 0, solved by scipy (DOP853, rtol 1e-12).
 
-    The linear oscillator lasts ``pi / w_d`` with restitution ``exp(-z pi / sqrt(1 - z^2))``;
-    with the clamp the dashpot stops pulling when ``k d + c d' = 0``, so the pair leaves a
-    little faster (restitution up by O(z)). Returned: the clamped values.
+    Without the no-tension clamp this is the linear oscillator, ``pi / w_d`` and
+    ``exp(-z pi / sqrt(1 - z^2))``; with it the dashpot stops pulling when ``k d + c d' = 0``,
+    so the pair leaves a little faster (restitution up by O(z)). Independent of the engine:
+    the tests use it as their reference too.
     """
     from scipy.integrate import solve_ivp
 

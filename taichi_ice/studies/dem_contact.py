@@ -75,7 +75,7 @@ import numpy as np
 
 from ..friction import RateState
 from .hold_slide import hold_slide
-from .single_interface import Profile, gain_phase, profiles
+from .single_interface import Profile, gain_phase, profiles, speed_axis
 
 # ---- 1. The block on a moving floor -----------------------------------------------------------
 FLOOR, BLOCK = 0, 1  # body indices of the floor scene
@@ -477,14 +477,7 @@ def plot(
         ax.set_xlabel("time (s)")
         ax.set_ylabel("friction coefficient mu")
         ax.set_xlim(0.0, profile.shown)
-        ax2 = ax.twinx()
-        ax2.plot(t[shown], v[shown] * 1e3, "--", color="C3", lw=1.2, label="floor speed")
-        ax2.set_ylabel("floor speed V (mm/s)", color="C3")
-        ax2.tick_params(axis="y", colors="C3")
-        ax2.set_ylim(0.0, 1.2 * float(v[shown].max()) * 1e3)
-        if name == "step":
-            lines = ax.get_lines() + ax2.get_lines()
-            ax.legend(lines, [ln.get_label() for ln in lines], loc="center right", fontsize=8)
+        speed_axis(ax, t[shown], v[shown], "floor speed", legend=name == "step")
     fig.suptitle(
         "Friction through a DEM contact: a block on a floor moving at V(t) "
         "(rate and state, Lishman et al. 2013)"

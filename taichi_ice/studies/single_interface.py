@@ -291,20 +291,26 @@ def plot_figure3(
         ax.set_xlabel("time (s)")
         ax.set_ylabel("friction coefficient mu")
         ax.set_xlim(0.0, profile.shown)
-        ax2 = ax.twinx()
-        ax2.plot(t[shown], v[shown] * 1e3, "--", color="C3", lw=1.2, label="slip rate")
-        ax2.set_ylabel("slip rate V (mm/s)", color="C3")
-        ax2.tick_params(axis="y", colors="C3")
-        ax2.set_ylim(0.0, 1.2 * float(v[shown].max()) * 1e3)
-        if name == "step":
-            lines = ax.get_lines() + ax2.get_lines()
-            ax.legend(lines, [ln.get_label() for ln in lines], loc="center right", fontsize=8)
+        speed_axis(ax, t[shown], v[shown], "slip rate", legend=name == "step")
     fig.suptitle(
         "Friction on one interface (rate and state, Lishman et al. 2013): "
         "slip rate dashed, friction solid"
     )
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def speed_axis(ax, t, v, label: str, legend: bool = False) -> None:
+    """The speed ``v`` (m/s, shown in mm/s) dashed on a right-hand axis of ``ax``; with
+    ``legend``, one legend for both axes."""
+    ax2 = ax.twinx()
+    ax2.plot(t, v * 1e3, "--", color="C3", lw=1.2, label=label)
+    ax2.set_ylabel(f"{label} V (mm/s)", color="C3")
+    ax2.tick_params(axis="y", colors="C3")
+    ax2.set_ylim(0.0, 1.2 * float(v.max()) * 1e3)
+    if legend:
+        lines = ax.get_lines() + ax2.get_lines()
+        ax.legend(lines, [ln.get_label() for ln in lines], loc="center right", fontsize=8)
 
 
 def main(argv: list[str] | None = None) -> int:

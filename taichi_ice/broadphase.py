@@ -1,18 +1,24 @@
-"""Broad phase: a spatial hash of the small bodies, rebuilt every step.
+"""Broad phase: neighbour lists with a skin, found through a spatial hash or all pairs.
 
-Cells are squares of edge ``h`` = the diameter of the largest small body, so two small bodies
-can only touch if their cells are neighbours (3 x 3 search). A cell ``(cx, cy)`` of world
-``w`` maps to one of H buckets (a power of two) by a multiplicative hash; buckets are
-counted, prefix-summed and filled, giving the ids of each bucket's bodies contiguous in
-``sorted_ids`` (a counting sort). Two cells, or two worlds, that collide in one bucket are
-told apart by comparing the body's own cell and world, so a bucket collision costs a few
-wasted candidates, never a wrong or a duplicated pair.
+A body's neighbour list (``NeighbourList``) holds the partners it owns whose bounding circles
+come within the skin of its own; the contact stage filters it every step and it is rebuilt
+only when a body of the world has moved half the skin. Two ways find the lists:
 
-Large bodies (walls, pushers, anything bigger than ``h``) are not hashed: every body checks
-the few large bodies of its world directly (state.large_ids).
+- stepping in parallel over bodies (large worlds), a spatial hash of the small bodies
+  (``SpatialHash``), rebuilt with the lists: cells are squares of edge ``h`` = the diameter of
+  the largest small body plus the skin, so two small bodies whose circles come within the
+  skin are in neighbouring cells (3 x 3 search). A cell ``(cx, cy)`` of world ``w`` maps to
+  one of H buckets (a power of two) by a multiplicative hash; buckets are counted,
+  prefix-summed and filled, giving the ids of each bucket's bodies contiguous in
+  ``sorted_ids`` (a counting sort). Two cells, or two worlds, that collide in one bucket are
+  told apart by comparing the body's own cell and world, so a bucket collision costs a few
+  wasted candidates, never a wrong or a duplicated pair;
+- stepping a world in one thread (small worlds), all pairs of the world.
 
-Its fields (``bucket_count``, ``bucket_start``, ``bucket_fill``, ``block_total``,
-``sorted_ids``, ``body_cell``) are declared in ``taichi_ice.schema`` (``HASH``).
+Large bodies (walls, pushers, anything bigger than the largest dynamic body) are not hashed:
+every body checks the few large bodies of its world directly (state.large_ids).
+
+The fields are declared in ``taichi_ice.schema`` (``HASH``, ``NEIGHBOURS``).
 """
 
 from __future__ import annotations
@@ -69,7 +75,8 @@ class SpatialHash(Fields, Stage):
         super().__init__(layout, schema.groups()["hash"])
         self.model, self.data = model, data
         h = layout.hash_size
-        self.inv_cell = 1.0 / layout.cell_size
+        # Bodies whose circles come within the skin are at most a cell apart.
+        self.inv_cell = 1.0 / (layout.cell_size + layout.skin)
         self.mask = h - 1
         self.n_blocks = layout.size("scan_blocks")
 
@@ -117,12 +124,14 @@ class NeighbourList(Fields):
     steps (a Verlet list).
 
     A body's list holds the partners of its world it owns whose bounding circles come within
-    ``layout.skin`` of its own, in ascending id (``ContactStage.build_list``). As long as no
-    body of the world has moved more than half the skin since (``ContactStage.moved``), no
+    ``layout.skin`` of its own, in ascending id (``ContactStage.build_list``, or
+    ``build_lists`` through the hash). As long as no body of the world has moved more than
+    half the skin since (``Integrator.moved``), no
     pair outside the lists can have come into contact, so each step only filters its list by
     the exact bounding-circle test; the step that finds a body past half the skin marks the
-    world's lists stale, and they are rebuilt before its next step. The lists are scratch:
-    a world without valid lists (``world_nbr_stale``, 1 at the start) rebuilds them first.
+    world's lists stale (``world_nbr_stale``, and ``nbr_rebuild`` for the parallel step), and
+    they are rebuilt before its next step. The lists are scratch: a world without valid lists
+    (1 at the start) rebuilds them first.
 
     Its fields are declared in ``taichi_ice.schema`` (``NEIGHBOURS``).
     """

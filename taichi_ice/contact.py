@@ -172,13 +172,9 @@ class ContactStage(Stage):
             reads=(
                 # Model
                 "body_world",
-                "body_kind",
-                "body_small",
                 "body_radius",
                 "body_vert_start",
                 "body_vert_count",
-                "world_large_start",
-                "large_ids",
                 "world_mu",
                 "world_A",
                 "world_B",
@@ -187,11 +183,9 @@ class ContactStage(Stage):
                 "world_t_c",
                 "world_memory",
                 "world_rest_rule",
-                # Spatial hash
-                "body_cell",
-                "bucket_start",
-                "bucket_count",
-                "sorted_ids",
+                # Neighbour lists
+                "nbr_count",
+                "nbr_ids",
                 # Data in
                 "time_step",
                 "body_pos",
@@ -235,7 +229,38 @@ class ContactStage(Stage):
                 "body_torque_q",
                 "body_energy",
             ),
-        )
+        ),
+        "build_lists": Access(
+            reads=(
+                "body_world",
+                "body_kind",
+                "body_small",
+                "body_radius",
+                "body_vert_start",
+                "body_vert_count",
+                "world_large_start",
+                "large_ids",
+                "body_cell",
+                "bucket_start",
+                "bucket_count",
+                "sorted_ids",
+                "body_pos",
+                "body_angle",
+                "vert_turned",
+                "nbr_ids",
+                "world_nbr_stale",
+                "status",
+            ),
+            writes=(
+                "nbr_ids",
+                "nbr_count",
+                "nbr_ref_pos",
+                "nbr_ref_angle",
+                "world_nbr_stale",
+                "nbr_rebuild",
+                "status",
+            ),
+        ),
     }
 
     def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash, neighbours):
@@ -389,7 +414,7 @@ class ContactStage(Stage):
 
     @ti.func
     def owns(self, i, j):
-        """True if body i handles the pair (i, j) found from both sides in the hash."""
+        """True if body i handles the pair (i, j) of two small bodies (see ``wants``)."""
         kind = ti.static(self.model.body_kind)
         dyn_i, dyn_j = kind[i] == BodyKind.DYNAMIC, kind[j] == BodyKind.DYNAMIC
         return (dyn_i and not dyn_j) or (dyn_i == dyn_j and dyn_i and i < j)
@@ -462,22 +487,27 @@ class ContactStage(Stage):
             ti.atomic_max(d.status[Status.SLOT_OVERFLOW], need)
 
     @ti.func
-    def build_list(self, i):
-        """Body i's neighbour list: the partners of its world it owns (``wants``) whose
-        bounding circles come within the skin of its own (and, for large partners, whose
-        faces do not all lie beyond it), ascending; and where body i stands now."""
+    def list_add(self, i, j, n):
+        """Append j to body i's list (``n`` entries so far) if i owns the pair and their
+        bounding circles come within the skin (for a large partner, also if i's circle does
+        not lie wholly beyond one of its faces); returns the new count, which may pass the
+        list's length (reported by ``end_list``)."""
         m, d, nb = ti.static((self.model, self.data, self.neighbours))
         skin = ti.static(self.layout.skin)
-        w = m.body_world[i]
-        n = 0
-        for j in range(m.world_body_start[w], m.world_body_start[w + 1]):
-            if j != i and self.wants(i, j):
-                reach = m.body_radius[i] + m.body_radius[j] + skin
-                if (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach:
-                    if m.body_small[j] or not self.beyond_a_face(i, j, skin):
-                        if n < self.layout.nbr_len:
-                            nb.nbr_ids[i, n] = j
-                        n += 1
+        if j != i and self.wants(i, j):
+            reach = m.body_radius[i] + m.body_radius[j] + skin
+            if (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach:
+                if m.body_small[j] or not self.beyond_a_face(i, j, skin):
+                    if n < self.layout.nbr_len:
+                        nb.nbr_ids[i, n] = j
+                    n += 1
+        return n
+
+    @ti.func
+    def end_list(self, i, n):
+        """Close body i's list of ``n`` entries: its count, where body i stands now, and the
+        overflow report."""
+        d, nb = ti.static((self.data, self.neighbours))
         nb.nbr_count[i] = ti.min(n, self.layout.nbr_len)
         nb.nbr_ref_pos[i] = d.body_pos[i]
         nb.nbr_ref_angle[i] = d.body_angle[i]
@@ -485,15 +515,61 @@ class ContactStage(Stage):
             ti.atomic_max(d.status[Status.LIST_OVERFLOW], n)
 
     @ti.func
-    def moved(self, i):
-        """How far any point of body i that the lists rely on has moved since its list was
-        built (m): its centroid for a small body (the bounding circle turns with it); for a
-        large one, whose faces are tested, also its circumradius times the turn."""
-        m, d, nb = ti.static((self.model, self.data, self.neighbours))
-        dist = (d.body_pos[i] - nb.nbr_ref_pos[i]).norm()
-        if not m.body_small[i]:
-            dist += m.body_radius[i] * ti.abs(d.body_angle[i] - nb.nbr_ref_angle[i])
-        return dist
+    def build_list(self, i):
+        """Body i's neighbour list from every body of its world (one thread per world):
+        ascending by construction."""
+        m, _d = ti.static((self.model, self.data))
+        w = m.body_world[i]
+        n = 0
+        for j in range(m.world_body_start[w], m.world_body_start[w + 1]):
+            n = self.list_add(i, j, n)
+        self.end_list(i, n)
+
+    @ti.func
+    def build_list_hashed(self, i):
+        """Body i's neighbour list from the 3 x 3 cells of the spatial hash around it and the
+        large bodies of its world, sorted ascending: the same list as ``build_list``."""
+        m, h, nb = ti.static((self.model, self.hash, self.neighbours))
+        w = m.body_world[i]
+        n = 0
+        if m.body_small[i]:
+            c = h.body_cell[i]
+            for k in range(9):
+                cell = c + ti.Vector([k % 3 - 1, k // 3 - 1])
+                b = bucket_of(cell, w, h.mask)
+                for e in range(h.bucket_start[b], h.bucket_start[b] + h.bucket_count[b]):
+                    j = h.sorted_ids[e]
+                    # A bucket may hold other cells or worlds: keep only this cell's bodies.
+                    if (
+                        m.body_world[j] == w
+                        and h.body_cell[j][0] == cell[0]
+                        and h.body_cell[j][1] == cell[1]
+                    ):
+                        n = self.list_add(i, j, n)
+        for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
+            n = self.list_add(i, m.large_ids[g], n)
+        # Ascending ids (insertion sort of a few entries).
+        for k in range(1, ti.min(n, self.layout.nbr_len)):
+            v = nb.nbr_ids[i, k]
+            s = k
+            while s > 0 and nb.nbr_ids[i, s - 1] > v:
+                nb.nbr_ids[i, s] = nb.nbr_ids[i, s - 1]
+                s -= 1
+            nb.nbr_ids[i, s] = v
+        self.end_list(i, n)
+
+    @ti.kernel
+    def build_lists(self):
+        """Rebuild the neighbour lists of every stale world from the spatial hash (built
+        from the current positions first, ``SpatialHash.build``)."""
+        m, nb = ti.static((self.model, self.neighbours))
+        for i in range(self.layout.n_bodies):
+            if nb.world_nbr_stale[m.body_world[i]]:
+                self.build_list_hashed(i)
+        for w in range(self.layout.n_worlds):
+            nb.world_nbr_stale[w] = 0
+            if w == 0:
+                nb.nbr_rebuild[None] = 0
 
     @ti.func
     def listed(self, i, cur, dt):
@@ -511,47 +587,7 @@ class ContactStage(Stage):
 
     @ti.kernel
     def compute(self, cur: ti.i32):
-        """Forces of every contact of the step, candidates from the spatial hash; memory read
-        from buffer cur, written to 1 - cur."""
-        m, d, h = ti.static((self.model, self.data, self.hash))
+        """Forces of every contact of the step in parallel over bodies, candidates from the
+        neighbour lists; memory read from buffer cur, written to 1 - cur."""
         for i in range(self.layout.n_bodies):
-            dt = d.time_step[None]
-            # Gather the partners first, then handle them in one loop: the narrow phase is
-            # inlined once, which keeps the kernel's compile time short.
-            cand = ti.Vector.zero(ti.i32, self.n_cand)
-            n = 0
-            w = m.body_world[i]
-            if m.body_small[i] and m.body_kind[i] == BodyKind.DYNAMIC:
-                c = h.body_cell[i]
-                for nb in range(9):
-                    cell = c + ti.Vector([nb % 3 - 1, nb // 3 - 1])
-                    b = bucket_of(cell, w, h.mask)
-                    for e in range(h.bucket_start[b], h.bucket_start[b] + h.bucket_count[b]):
-                        j = h.sorted_ids[e]
-                        # A bucket may hold other cells or worlds: keep only this cell.
-                        if (
-                            j != i
-                            and m.body_world[j] == w
-                            and h.body_cell[j][0] == cell[0]
-                            and h.body_cell[j][1] == cell[1]
-                            and self.owns(i, j)
-                            and self.near(i, j)
-                        ):
-                            if n < self.n_cand:
-                                cand[n] = j
-                            n += 1
-            for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
-                j = m.large_ids[g]
-                if self.wants(i, j) and self.near(i, j) and not self.beyond_a_face(i, j, 0.0):
-                    if n < self.n_cand:
-                        cand[n] = j
-                    n += 1
-            # Ascending ids, as the neighbour lists give them (insertion sort: a few entries).
-            for k in range(1, ti.min(n, self.n_cand)):
-                v = cand[k]
-                s = k
-                while s > 0 and cand[s - 1] > v:
-                    cand[s] = cand[s - 1]
-                    s -= 1
-                cand[s] = v
-            self.body(i, cand, n, cur, dt)
+            self.listed(i, cur, self.data.time_step[None])

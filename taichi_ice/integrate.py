@@ -9,7 +9,8 @@ so kinetic energy and work agree to round-off and the energy residual measures o
 time discretisation of the contact forces.
 
 The stage also reads the contact forces gathered in fixed point, clears them for the next
-step, accumulates probe impulses, and raises the non-finite and runaway flags.
+step, accumulates probe impulses, raises the non-finite and runaway flags, and marks a
+world's neighbour lists stale when one of its bodies has moved half their skin.
 """
 
 from __future__ import annotations
@@ -52,6 +53,12 @@ class Integrator(Stage):
                 "body_pos",
                 "body_angle",
                 "body_energy",
+                # Neighbour lists: has the body moved half the skin?
+                "body_small",
+                "body_radius",
+                "body_world",
+                "nbr_ref_pos",
+                "nbr_ref_angle",
             ),
             writes=(
                 "body_force_q",
@@ -64,6 +71,8 @@ class Integrator(Stage):
                 "body_energy",
                 "status",
                 "vert_turned",
+                "world_nbr_stale",
+                "nbr_rebuild",
             ),
         ),
         "orient": Access(
@@ -72,10 +81,12 @@ class Integrator(Stage):
         ),
     }
 
-    def __init__(self, layout: Layout, model: Model, data: Data):
+    def __init__(self, layout: Layout, model: Model, data: Data, neighbours):
         self.layout, self.model, self.data = layout, model, data
+        self.neighbours = neighbours
         # A dynamic body faster than this (m/s) flags the run as diverged (assemble).
         self.runaway_speed = float(layout.runaway_speed)
+        self.half_skin = 0.5 * float(layout.skin)
 
     @ti.kernel
     def orient(self):
@@ -98,6 +109,25 @@ class Integrator(Stage):
     def advance(self):
         for i in range(self.layout.n_bodies):
             self.body(i, self.data.time_step[None])
+
+    @ti.func
+    def moved(self, i):
+        """How far any point of body i that its neighbour list relies on has moved since the
+        list was built (m): its centroid for a small body (the bounding circle turns with
+        it); for a large one, whose faces are tested, also its circumradius times the turn."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        dist = (d.body_pos[i] - nb.nbr_ref_pos[i]).norm()
+        if not m.body_small[i]:
+            dist += m.body_radius[i] * ti.abs(d.body_angle[i] - nb.nbr_ref_angle[i])
+        return dist
+
+    @ti.func
+    def moving(self, i):
+        """Mark body i's world's lists stale if it has moved half their skin."""
+        m, nb = ti.static((self.model, self.neighbours))
+        if self.moved(i) > self.half_skin:
+            nb.world_nbr_stale[m.body_world[i]] = 1
+            nb.nbr_rebuild[None] = 1
 
     @ti.func
     def body(self, i, dt):
@@ -132,6 +162,7 @@ class Integrator(Stage):
             d.body_pos[i] += ti.cast(dt * v1, ti.f64)
             d.body_angle[i] += dt * w1
             self.turn(i)
+            self.moving(i)
             speed2 = v1.norm_sqr()
             if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
                 d.status[Status.NONFINITE] = 1
@@ -145,3 +176,4 @@ class Integrator(Stage):
             d.body_angle[i] += dt * w
             if w != 0.0:
                 self.turn(i)
+            self.moving(i)

@@ -211,7 +211,7 @@ DATA: tuple[Var, ...] = (
     Var("time_step", "real", (), "s", "dt of the run", role="cold"),
 )
 
-# The spatial hash, rebuilt every step (broadphase.SpatialHash).
+# The spatial hash of the parallel step, rebuilt with its neighbour lists (broadphase.SpatialHash).
 HASH: tuple[Var, ...] = (
     Var("bucket_count", "i32", ("hash_size",), "", "bodies in each bucket this step"),
     Var("bucket_start", "i32", ("hash_size",), "id", "first entry of each bucket in sorted_ids"),
@@ -229,6 +229,7 @@ NEIGHBOURS: tuple[Var, ...] = (
     Var("nbr_ref_pos", "f64", ("n_bodies",), "m", "centroid when the list was built", lanes=2),
     Var("nbr_ref_angle", "real", ("n_bodies",), "rad", "angle when the list was built"),
     Var("world_nbr_stale", "i32", ("n_worlds",), "", "1 if the world's lists must be rebuilt before its next step", init=1),
+    Var("nbr_rebuild", "i32", (), "", "1 if some world's lists are stale (the parallel step reads it back before each step)", role="cold", init=1),
 )
 # fmt: on
 
@@ -544,7 +545,9 @@ def _target_bases(node: ast.AST) -> list[ast.AST]:
     return [node]
 
 
-def traffic(stages: Mapping[str, type], layout: Layout, contacts: float) -> dict[str, float]:
+def traffic(
+    stages: Mapping[str, type], layout: Layout, contacts: float, kernels=None
+) -> dict[str, float]:
     """Bytes per step that each kernel must move, from the stages' declarations.
 
     Compulsory traffic: each element a kernel declares is counted once per launch (a
@@ -558,6 +561,8 @@ def traffic(stages: Mapping[str, type], layout: Layout, contacts: float) -> dict
             reported under (``hash.build``).
         layout: the batch's layout.
         contacts: contacts of the step.
+        kernels: the ``"stage.kernel"`` names a step launches; default every kernel of
+            ``stages``.
 
     Returns:
         ``{"stage.kernel": bytes}`` and ``"total"``.
@@ -565,6 +570,8 @@ def traffic(stages: Mapping[str, type], layout: Layout, contacts: float) -> dict
     out: dict[str, float] = {}
     for stage_name, cls in stages.items():
         for kernel, access in cls.ACCESS.items():
+            if kernels is not None and f"{stage_name}.{kernel}" not in kernels:
+                continue
             total = 0.0
             for name in (*access.reads, *access.writes):
                 v = var(name)
@@ -604,7 +611,7 @@ def markdown_table() -> str:
     titles = {
         "model": "Model: static after set-up",
         "data": "Data: mutable",
-        "hash": "Spatial hash: rebuilt every step",
+        "hash": "Spatial hash: rebuilt with the neighbour lists of the parallel step",
         "nbr": "Neighbour lists: rebuilt when a body has moved half the skin",
     }
     for group, fields in groups().items():

@@ -107,6 +107,7 @@ class WorldStepper(Stage):
                 "status",
                 "vert_turned",
                 "world_nbr_stale",
+                "nbr_rebuild",
             ),
             per_contact=ContactStage.ACCESS["compute"].per_contact,
         )
@@ -124,7 +125,6 @@ class WorldStepper(Stage):
     ):
         self.layout, self.model, self.data = layout, model, data
         self.neighbours, self.contacts, self.integrator = neighbours, contacts, integrator
-        self.half_skin = 0.5 * float(layout.skin)
 
     @ti.kernel
     def run(self, n: ti.i32, cur: ti.i32):
@@ -141,10 +141,5 @@ class WorldStepper(Stage):
                     nb.world_nbr_stale[w] = 0
                 for i in range(lo, hi):
                     self.contacts.listed(i, buf, dt)
-                stale = 0
                 for i in range(lo, hi):
-                    self.integrator.body(i, dt)
-                    if self.contacts.moved(i) > self.half_skin:
-                        stale = 1
-                if stale:
-                    nb.world_nbr_stale[w] = 1
+                    self.integrator.body(i, dt)  # marks the lists stale

@@ -1,10 +1,12 @@
 """A batch of independent worlds and its step: the algorithm, stage by stage.
 
-Stepping in parallel over bodies (``stepping="bodies"``: large worlds), three kernel
+Stepping in parallel over bodies (``stepping="bodies"``: large worlds), two kernel
 launches per step, whatever the number of worlds or bodies:
 
-    step():  hash.build()          broad phase: bucket every small body by its cell
-             contacts.compute()    narrow phase, contact forces, contact memory
+    step():  refresh_lists()       only when a body has moved half the skin (read back):
+                                   hash.build(), contacts.build_lists()
+             contacts.compute()    narrow phase from the neighbour lists, contact forces,
+                                   contact memory
              integrator.advance()  forces -> velocities -> positions, work and drag
 
 Stepping in parallel over worlds (``stepping="worlds"``: small worlds, batches of them), one
@@ -98,7 +100,7 @@ class World:
         self.hash = SpatialHash(self.layout, self.model, self.data)
         self.neighbours = NeighbourList(self.layout)
         self.contacts = ContactStage(self.layout, self.model, self.data, self.hash, self.neighbours)
-        self.integrator = Integrator(self.layout, self.model, self.data)
+        self.integrator = Integrator(self.layout, self.model, self.data, self.neighbours)
         self.integrator.orient()
         self.energy = EnergyMeter(self.layout, self.model, self.data)
         self.stepper = WorldStepper(
@@ -125,12 +127,19 @@ class World:
             self.cur = (self.cur + n) % 2
         else:
             for _ in range(n):
-                self.hash.build()
+                self.refresh_lists()
                 self.contacts.compute(self.cur)
                 self.integrator.advance()
                 self.cur = 1 - self.cur
         self.steps += n
         self.time = self.steps * self.dt
+
+    def refresh_lists(self) -> None:
+        """Rebuild the neighbour lists of the worlds that need it, through the spatial hash
+        (the parallel step's broad phase; one read-back of ``nbr_rebuild``)."""
+        if self.neighbours.nbr_rebuild[None]:
+            self.hash.build()
+            self.contacts.build_lists()
 
     def check(self) -> None:
         """Raise if a step overflowed the contact slots or diverged (reads back the status word)."""
@@ -175,6 +184,7 @@ class World:
         self.data.body_angle.from_numpy(ang)
         self.integrator.orient()
         self.neighbours.world_nbr_stale.fill(1)
+        self.neighbours.nbr_rebuild[None] = 1
 
     # ----------------------------------------------------------------------------------------
     # Reading the state

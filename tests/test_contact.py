@@ -169,7 +169,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
         d.body_force_q.fill(0)
         d.body_torque_q.fill(0)
         d.body_energy.fill(0.0)
-        world.hash.build()
+        world.refresh_lists()
         world.contacts.compute(step)
         force_q = d.body_force_q.to_numpy()
         torque_q = d.body_torque_q.to_numpy()
@@ -325,7 +325,7 @@ def test_spatial_hash_finds_exactly_the_overlapping_pairs(f64):
         pos[sl.start] = [side / 2, 2.0 + 3.0 * w]  # wall_a across the square
         pos[sl.start + 1] = [5.0 - 3.0 * w, side / 2]  # wall_b across the square
     world.place(pos, ang)
-    world.hash.build()
+    world.refresh_lists()
     world.contacts.compute(world.cur)
     assert world.data.status.to_numpy()[Status.SLOT_OVERFLOW] <= world.layout.slots
     state = ReferenceState(pos=pos, angle=ang, vel=world.velocities(), omega=world.omegas())

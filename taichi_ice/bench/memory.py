@@ -11,10 +11,14 @@ import os
 import resource
 import sys
 
-__all__ = ["STEP_STAGES", "field_bytes", "rss_bytes", "traffic"]
+__all__ = ["STEP_KERNELS", "field_bytes", "rss_bytes", "traffic"]
 
-# The stages whose kernels make up a step, by the name their times are reported under.
-STEP_STAGES = ("hash", "contacts", "integrator")
+# The kernels of a step by the World's stepping, named as their times are reported. (The
+# parallel step's hash and list rebuilds run once in hundreds of steps and are left out.)
+STEP_KERNELS = {
+    "bodies": ("contacts.compute", "integrator.advance"),
+    "worlds": ("stepper.run",),
+}
 
 
 def field_bytes(world) -> dict[str, int]:
@@ -35,11 +39,11 @@ def traffic(world, contacts: float) -> dict:
     from .. import schema
     from ..world import STAGES
 
-    stages = {name: STAGES[name] for name in STEP_STAGES if name in STAGES}
-    per_kernel = schema.traffic(stages, world.layout, contacts)
+    kernels = STEP_KERNELS[getattr(world, "stepping", "bodies")]
+    per_kernel = schema.traffic(STAGES, world.layout, contacts, kernels)
     total = per_kernel.pop("total")
-    no_contacts = schema.traffic(stages, world.layout, 0.0)["total"]
-    one_contact = schema.traffic(stages, world.layout, 1.0)["total"]
+    no_contacts = schema.traffic(STAGES, world.layout, 0.0, kernels)["total"]
+    one_contact = schema.traffic(STAGES, world.layout, 1.0, kernels)["total"]
     return {
         "bytes_per_step": total,
         "bytes_per_kernel": per_kernel,

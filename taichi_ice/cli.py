@@ -144,6 +144,18 @@ def _cmd_ensemble(args) -> int:
     )
 
 
+def _cmd_sweep(args) -> int:
+    from .sweep import sweep_command
+
+    return sweep_command(args)
+
+
+def _cmd_study(args) -> int:
+    from .study import study_command
+
+    return study_command(args)
+
+
 def _cmd_bench(args) -> int:
     from .bench import bench_command
 
@@ -283,6 +295,24 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         help="a law to run (repeatable; default the scene's): coulomb[:MU], rate-state[:..]",
     )
+    _engine_options(p)
+
+    from .study import add_options as study_options
+    from .sweep import add_options as sweep_options
+
+    p = add(
+        "sweep",
+        "layouts x friction laws x scene overrides in batches on Dask (resumable): a netCDF file",
+        _cmd_sweep,
+    )
+    sweep_options(p)
+    _engine_options(p)
+    p = add(
+        "study",
+        "the pillar scene over layouts x 8 friction models x area fractions: claims with CIs",
+        _cmd_study,
+    )
+    study_options(p)
     _engine_options(p)
 
     p = add(

@@ -56,6 +56,20 @@ METRICS = (
     "residual_rel",
 )
 
+# Unit and long name of every metric (the dataset's attributes, the study's tables).
+METRIC_INFO = {
+    "peak_force": ("N", "largest magnitude of the total contact force on the probe bodies"),
+    "mean_force": ("N", "time-mean magnitude of the total contact force on the probe bodies"),
+    "friction_energy": ("J", "energy dissipated by friction at the end of the run"),
+    "crushing_energy": ("J", "work done crushing ice beyond its strength at the end"),
+    "concentration": ("1", "largest share of the frictional energy dissipated in one window"),
+    "final_force": ("N", "mean probe force over the last window"),
+    "released": ("1", "1 if the final probe force is below a tenth of its peak (jam broken)"),
+    "first_contact": ("s", "first time with a force on a probe body"),
+    "residual": ("J", "energy budget residual at the end: energy in minus energy accounted"),
+    "residual_rel": ("1", "energy budget residual over the energy that came in"),
+}
+
 # A jam counts as released when the probe force over the last window is below this fraction
 # of its peak.
 RELEASED_FRACTION = 0.1
@@ -189,8 +203,6 @@ def run_ensemble(
     Raises:
         ScenarioError: a seed's jitter makes blocks overlap at the start.
     """
-    from .simulation import Simulation
-
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("an ensemble needs at least one seed")
@@ -198,10 +210,45 @@ def run_ensemble(
         raise ValueError(f"seeds repeat: {seeds}")
     if friction is not None:
         scene = scene.with_friction(friction)
-    scenes = [scene.reseeded(s) for s in seeds]
     if isinstance(out, (str, Path)):
         width = max(4, len(str(max(seeds))))
         out = [Path(out) / f"seed-{s:0{width}d}.h5" for s in seeds]
+    return run_worlds(
+        [scene.reseeded(s) for s in seeds],
+        label=scene.friction.label,
+        until=until,
+        out=out,
+        arch=arch,
+        precision=precision,
+        dt=dt,
+        slots=slots,
+        window=window,
+        progress=progress,
+    )
+
+
+def run_worlds(
+    scenes: Sequence,
+    *,
+    label: str = "",
+    until: float | None = None,
+    out: Sequence[str | Path] | None = None,
+    arch: str = "cpu",
+    precision: str = "f64",
+    dt: float | None = None,
+    slots: int | None = None,
+    window: float = 1.0,
+    progress: bool = False,
+) -> EnsembleResult:
+    """Run ``scenes`` (any layouts, laws and settings one batch can share, see
+    ``assemble.assemble``) as the worlds of one Simulation and compute each one's metrics.
+
+    ``run_ensemble`` is this over the seeds of one scene; a sweep runs its batches with it.
+    Arguments and result as ``run_ensemble``'s (``out``: one path per scene, or None).
+    """
+    from .simulation import Simulation
+
+    scenes = list(scenes)
     sim = Simulation(scenes, arch=arch, precision=precision, dt=dt, slots=slots)
     try:
         result = sim.run(until=until, out=out, progress=progress)
@@ -209,8 +256,8 @@ def run_ensemble(
         result = exc.result
     return EnsembleResult(
         **vars(result),
-        label=scene.friction.label,
-        seeds=seeds,
+        label=label,
+        seeds=[s.simulation.seed for s in scenes],
         metrics=[run_metrics(s, window) for s in result.series],
     )
 

@@ -1,0 +1,231 @@
+"""Sweeps: the file is checked like a scene, the grid is what it says, a sweep's dataset does
+not depend on the workers or batches, and a killed sweep resumes with only what is missing."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import shapely
+
+from taichi_ice.cli import main
+from taichi_ice.scenario import load_scenario
+from taichi_ice.sweep import SweepError, apply_overrides, load_sweep, run_sweep
+
+PILLAR = "scenarios/pillar.toml"
+
+# A pillar scene cut to 3 rows of 7 blocks that start 0.035 m below the pillar and drift at
+# 0.5 m/s, so that jams build within the 0.4 s the tests run.
+SMALL = (
+    open(PILLAR)
+    .read()
+    .replace("rows = 9\n", "rows = 3\n")
+    .replace("origin = [0.411, 0.55]", "origin = [0.411, 3.945]")
+    .replace("position = [2.8, -0.2]", "position = [2.8, 3.195]")
+    .replace("velocity = [0.0, 0.1]     # m/s up", "velocity = [0.0, 0.5]     # m/s up")
+    .replace("velocity = [0.0, 0.1]     # m/s: drifting", "velocity = [0.0, 0.5]     # m/s: drift")
+)
+
+SWEEP = """
+[sweep]
+scene = "small.toml"
+seeds = { start = 0, count = 2 }
+until = 0.4
+
+[[law]]
+law = "coulomb"
+mu = [0.3, 0.9]
+
+[overrides]
+"field.rubble.area_fraction" = [0.75, 0.85]
+"""
+
+
+@pytest.fixture
+def sweep_dir(tmp_path):
+    (tmp_path / "small.toml").write_text(SMALL)
+    (tmp_path / "sweep.toml").write_text(SWEEP)
+    return tmp_path
+
+
+def _bad(tmp_path, text: str) -> str:
+    (tmp_path / "small.toml").write_text(SMALL)
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(SweepError) as info:
+        load_sweep(path)
+    message = str(info.value)
+    assert message.startswith(str(path)), message
+    return message
+
+
+BASE = '[sweep]\nscene = "small.toml"\n'
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (BASE + "seed = [0, 1]\n", ["[sweep]", "'seed'", "did you mean 'seeds'"]),
+        (BASE + "seeds = [0, 1, 1]\n", ["'seeds'", "repeat"]),
+        (BASE + 'seeds = "3"\n', ["'seeds'", "{ start = 0, count = 8 }"]),
+        (BASE + "metrics = ['peak_forces']\n", ["'metrics'", "did you mean 'peak_force'"]),
+        (BASE + "runs = [7]\n", ["'runs'", "world 7 does not exist"]),
+        (BASE + '[[law]]\nlaw = "coulomb"\nmu = [0.5, -1.0]\n', ["[[law]] #0", "'mu'"]),
+        (BASE + '[[law]]\nlaw = "rate-state"\nmu = 0.5\n', ["[[law]] #0", "'mu'", "coulomb"]),
+        (BASE + '[[law]]\nlaw = "rate_state"\n', ["[[law]] #0", 'did you mean "rate-state"']),
+        (
+            BASE + '[[law]]\nlaw = "coulomb"\nmu = [0.5]\n[[law]]\nlaw = "coulomb"\n',
+            ["[[law]] #1", "mu0.5 is already in [[law]] #0"],
+        ),
+        (BASE + "[overrides]\nice.thicknes = [0.2]\n", ["[overrides]", "did you mean 'thickness'"]),
+        (BASE + '[overrides]\n"body.pushr.speed" = [0.1]\n', ["no body named 'pushr'", "pusher"]),
+        (BASE + '[overrides]\n"body.pusher.velocity" = [[0, 1]]\n', ["a number or a list"]),
+        (BASE + '[overrides]\n"simulation.seed" = [1]\n', ["[sweep] seeds"]),
+        # A value the scene refuses, with the scene's own message: the blocks would overlap.
+        (
+            BASE + '[overrides]\n"field.rubble.area_fraction" = [0.99]\n',
+            ["area_fraction = 0.99", "overlap"],
+        ),
+    ],
+)
+def test_bad_sweep_files_are_refused_with_file_table_and_key(tmp_path, text, expected):
+    """Each mistake in a sweep file is refused before anything runs, naming file and key."""
+    message = _bad(tmp_path, text)
+    for part in expected:
+        assert part in message, message
+
+
+def test_bad_sweep_on_the_command_line_is_one_line(tmp_path, capsys):
+    """`taichi-ice sweep` with a bad file: exit status 2 and one line on stderr."""
+    (tmp_path / "small.toml").write_text(SMALL)
+    (tmp_path / "bad.toml").write_text(BASE + "[overrides]\nice.thicknes = [0.2]\n")
+    status = main(["sweep", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "o"), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and "thicknes" in err[0], err
+
+
+def test_the_worlds_are_every_law_value_and_seed(sweep_dir):
+    """2 laws x 2 area fractions x 2 seeds = 8 worlds, in that nesting, each key unique."""
+    sweep = load_sweep(sweep_dir / "sweep.toml")
+    worlds = sweep.worlds()
+    got = [(w.label, w.overrides[0][1], w.seed) for w in worlds]
+    assert got == [(mu, af, s) for mu in ("mu0.3", "mu0.9") for af in (0.75, 0.85) for s in (0, 1)]
+    assert len({w.key for w in worlds}) == 8
+    assert [w.index for w in worlds] == list(range(8))
+
+
+def test_area_fraction_and_speed_overrides_set_what_they_name():
+    """area_fraction: block area over the lattice cell (shapely) equals the value asked for;
+    the last row stays, the first row and the pusher move together; speed keeps direction."""
+    scene = load_scenario(PILLAR)
+    raw = dict(scene.raw)
+    raw["field"] = [{**raw["field"][0], "jitter": 0.0}]
+    from taichi_ice.scenario import scene_from_dict
+
+    still = scene_from_dict(raw, source="still")
+    new = apply_overrides(still, [("field.rubble.area_fraction", 0.7), ("body.pusher.speed", 0.25)])
+
+    def y(s, name):
+        return {b.name: b for b in s.bodies}[name].position[1]
+
+    block = {b.name: b for b in new.bodies}["rubble_r0_c0"]
+    area = shapely.Polygon(block.world_vertices()).area
+    spacing_x = new.bodies[-1].position[0] - new.bodies[-2].position[0]  # neighbours in a row
+    spacing_y = y(new, "rubble_r1_c0") - y(new, "rubble_r0_c0")
+    assert area / (spacing_x * spacing_y) == pytest.approx(0.7, rel=1e-12)
+    assert y(new, "rubble_r8_c0") == pytest.approx(y(still, "rubble_r8_c0"), abs=1e-12)
+    shift = y(new, "rubble_r0_c0") - y(still, "rubble_r0_c0")
+    pusher = {b.name: b for b in new.bodies}["pusher"]
+    pusher0 = {b.name: b for b in still.bodies}["pusher"]
+    assert pusher.position[1] - pusher0.position[1] == pytest.approx(shift, abs=1e-12)
+    assert shift < -0.5  # a looser field reaches further back
+    assert pusher.velocity == pytest.approx([0.0, 0.25])
+
+
+# The sweep that is killed: in one process (no Dask), batches of 4.
+KILLED = ["--workers", "0", "--batch-size", "4", "--quiet"]
+
+
+def _equal(a, b, names):
+    for name in names:
+        x, y = a[name].values, b[name].values
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), (name, x, y)
+
+
+def test_two_workers_equal_one_process_and_a_killed_sweep_resumes(sweep_dir, taichi_runtime):
+    """The dataset of a sweep killed after its first batch and resumed on a 2-worker local
+    cluster (batches of 4, then 2) equals the single-process run (batches of 7 and 1, the
+    latter with its HDF5 run), value for value, and the resume runs only what was missing;
+    the dataset opens in xarray with its coordinates, units and provenance."""
+    from taichi_ice.dataset import open_sweep
+    from taichi_ice.io import read_run
+
+    if taichi_runtime != ("cpu", "f64"):
+        pytest.skip("the worker processes run on the CPU in float64")
+    sweep = load_sweep(sweep_dir / "sweep.toml")
+    n = len(sweep.worlds())
+
+    # Reference: this process, no Dask; world 0 alone (its run is written), the rest together.
+    ref = run_sweep(
+        dataclasses.replace(sweep, runs=frozenset({0})),
+        sweep_dir / "ref",
+        workers=0,
+        progress=False,
+    )
+    assert ref.ran == list(range(n)) and not ref.failed_batches
+    expected = open_sweep(ref.path)
+    assert (expected.status.values == "complete").all()
+    assert expected.peak_force.values.min() > 0  # the jams built: the test compares forces
+    assert len(set(expected.batch.values)) == 2
+    # Self-describing: coordinates, units, long names, the sweep file and versions.
+    for coord in ("seed", "law", "law_name", "mu", "field.rubble.area_fraction"):
+        assert coord in expected.coords
+    assert expected.peak_force.attrs["units"] == "N"
+    assert expected.friction_energy.attrs["units"] == "J"
+    assert "long_name" in expected.concentration.attrs
+    assert expected.attrs["sweep"] == sweep.text and expected.attrs["xarray_version"]
+    files = sorted((sweep_dir / "ref" / "runs").iterdir())
+    assert [f.name for f in files] == ["mu0.3_area_fraction0.75_seed-0000.h5"]
+    run = read_run(files[0])
+    assert run["series"]["friction_energy"][-1] == expected.friction_energy.values[0]
+
+    # A sweep in another process, batches of 4, killed once its first batch is written.
+    out = sweep_dir / "killed"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "taichi_ice", "sweep", "sweep.toml", "--out", str(out), *KILLED],
+        cwd=sweep_dir,
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    deadline = time.monotonic() + 300
+    while not list((out / "batches").glob("batch-*.json")):
+        assert proc.poll() is None, proc.stderr.read().decode()
+        assert time.monotonic() < deadline, "no batch finished in 300 s"
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done = {
+        w["index"]
+        for f in (out / "batches").glob("batch-*.json")
+        for w in json.loads(f.read_text())["worlds"]
+    }
+    assert 0 < len(done) < n and not (out / "sweep.nc").exists()
+
+    resumed = run_sweep(dataclasses.replace(sweep, batch_size=2), out, workers=2, progress=False)
+    assert sorted(resumed.reused) == sorted(done)
+    assert resumed.ran == sorted(set(range(n)) - done)
+    got = open_sweep(out)
+    _equal(got, expected, [*sweep.metrics, "steps", "dt", "seed", "mu", "status"])
+    assert len(set(got.batch.values)) == len(done) // 4 + (n - len(done)) // 2
+
+    # Run again: nothing is missing, nothing runs.
+    again = run_sweep(sweep, out, workers=2, progress=False)
+    assert again.ran == [] and len(again.reused) == n

@@ -229,3 +229,9 @@ def test_two_workers_equal_one_process_and_a_killed_sweep_resumes(sweep_dir, tai
     # Run again: nothing is missing, nothing runs.
     again = run_sweep(sweep, out, workers=2, progress=False)
     assert again.ran == [] and len(again.reused) == n
+
+
+def test_the_example_sweep_is_valid():
+    """sweeps/pillar.toml (the README's example): 7 laws x 2 area fractions x 8 layouts."""
+    sweep = load_sweep("sweeps/pillar.toml")
+    assert len(sweep.worlds()) == 112 and sweep.runs == {0}

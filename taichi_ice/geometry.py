@@ -115,6 +115,15 @@ def check_polygon(vertices, what: str = "polygon") -> np.ndarray:
             f"{what}: not strictly convex: vertex {bad} {v[bad].tolist()} is {kind}; "
             "floes must be convex polygons (split a concave floe into convex pieces)"
         )
+    # Every turn is to the left, yet the outline may wind round more than once (a pentagram,
+    # a hexagon traced twice): the turning angles of a simple convex polygon sum to 2 pi.
+    turning = float(np.sum(np.arctan2(turns, np.sum(edges * np.roll(edges, -1, axis=0), axis=1))))
+    if turning > 3.0 * np.pi:
+        raise PolygonError(
+            f"{what}: crosses itself: its outline winds {turning / (2.0 * np.pi):.0f} times "
+            "around its inside (a star, or a polygon traced twice); list each corner once, in "
+            "counter-clockwise order"
+        )
     return v
 
 

@@ -33,10 +33,14 @@ import numpy as np
 from . import geometry
 from .codes import BodyKind
 from .errors import ScenarioError
+from .limits import check_size
 from .overlaps import OVERLAP_RTOL, find_overlaps
 from .scene import (
     DEFAULT_OUTPUT_INTERVAL,
     DEFAULT_SERIES_INTERVAL,
+    MAX_COORDINATE,
+    MAX_STEPS,
+    MAX_VERTICES,
     SHAPES,
     Body,
     FieldSpec,
@@ -237,6 +241,12 @@ def scene_from_dict(
         _parse_field(source, i, table)
         for i, table in enumerate(array_of_tables(source, data, "field"))
     ]
+    # Before any block is made: a field of 1e7 rows would otherwise fill the memory first.
+    check_size(
+        len(bodies) + sum(spec.rows * spec.columns for spec in specs),
+        f"{source}: [[field]] rows x columns",
+        fix="lower rows or columns (or run on a machine with more memory)",
+    )
     rng = np.random.default_rng(simulation.seed)
     for i, spec in enumerate(specs):
         for body in spec.layout(rng):
@@ -258,6 +268,8 @@ def scene_from_dict(
         fields=tuple(specs),
         raw=raw,
     )
+    _check_mass(scene, labels)
+    _check_extent(scene, labels)
     _check_time_step(scene)
     _check_overlaps(scene, labels)
     return scene
@@ -375,7 +387,14 @@ def _outline(t: Table, shape: str) -> np.ndarray:
         for key in ("width", "length"):
             if key in t:
                 raise t.error(key, 'is for rectangle and diamond; a polygon takes only "vertices"')
-        return t.polygon("vertices")
+        vertices = t.polygon("vertices")
+        if len(vertices) > MAX_VERTICES:
+            raise t.error(
+                "vertices",
+                f"{len(vertices)} vertices; a floe has at most {MAX_VERTICES} (the contact "
+                "kernels' limit): simplify its outline",
+            )
+        return vertices
     if "vertices" in t:
         raise t.error("vertices", f'is for shape = "polygon"; a {shape} takes width and length')
     width = t.number("width", positive=True, unit=" m")
@@ -494,11 +513,50 @@ def _check_names(source: str, bodies: list[Body], labels: list[str]) -> None:
         first[b.name] = i
 
 
+def _check_mass(scene: Scene, labels: list[str]) -> None:
+    """Every body's mass and moment of inertia are positive finite numbers (a width of 1e-150
+    m makes the inertia underflow to 0, and the stable time step with it)."""
+    with np.errstate(all="ignore"):
+        m, j = scene.masses, scene.inertias
+        good = (m > 0.0) & np.isfinite(m) & (j > 0.0) & np.isfinite(j)
+    if np.all(good):
+        return
+    i = int(np.argmin(good))
+    size = float(np.max(np.ptp(scene.bodies[i].vertices, axis=0)))
+    raise ScenarioError(
+        f"{scene.source}: {labels[i]}: its mass ({m[i]:.3g} kg) or moment of inertia "
+        f"({j[i]:.3g} kg m^2) is not a positive finite number (outline {size:.3g} m across): "
+        "give it the width and length (or vertices) of a real floe"
+    )
+
+
+def _check_extent(scene: Scene, labels: list[str]) -> None:
+    """Every body within ``MAX_COORDINATE`` of the origin (positions are float64: a block
+    1e12 m out is resolved to 0.1 mm, coarser than its contact overlaps)."""
+    far = np.max(np.abs(scene.positions), axis=1) if scene.n_bodies else np.zeros(0)
+    bad = np.flatnonzero(~(far <= MAX_COORDINATE))
+    if bad.size:
+        i = int(bad[0])
+        raise ScenarioError(
+            f"{scene.source}: {labels[i]}, key 'position': {scene.positions[i].tolist()} m is "
+            f"more than {MAX_COORDINATE:.0e} m from the origin; place the scene near the "
+            "origin (contacts resolve to 1e-16 of the coordinates)"
+        )
+
+
 def _check_time_step(scene: Scene) -> None:
     sim = scene.simulation
+    limit = scene.stable_dt
+    dt = sim.dt if sim.dt is not None else scene.dt
+    if not dt > 0.0 or sim.duration / dt > MAX_STEPS:
+        raise ScenarioError(
+            f"{scene.source}: [simulation]: duration = {sim.duration:g} s at dt = {dt:.3g} s "
+            f"(stable limit {limit:.3g} s) is {sim.duration / max(dt, 1e-300):.3g} steps, more "
+            f"than {MAX_STEPS:.0e}: shorten the duration, or give the smallest blocks real "
+            "floe sizes (the stable dt follows the lightest block)"
+        )
     if sim.dt is None:
         return
-    limit = scene.stable_dt
     if sim.dt > limit and not sim.force_dt:
         raise ScenarioError(
             f"{scene.source}: [simulation], key 'dt': {sim.dt:g} s is above the stable limit "

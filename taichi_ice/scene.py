@@ -46,6 +46,15 @@ SHAPES = ("rectangle", "diamond", "polygon")
 
 DEFAULT_OUTPUT_INTERVAL = 0.1  # s between frames
 DEFAULT_SERIES_INTERVAL = 0.01  # s between time-series samples (capped at output_interval)
+# Most vertices of one outline: the contact kernels hold an outline in a fixed-size local
+# matrix (assemble.MAX_VERTS_LIMIT, checked again there); checked here when a scene is read.
+MAX_VERTICES = 16
+# Most steps a run may need (duration / dt): beyond this a scene's smallest block is so small
+# (or light) that the run would never end; it is refused with the block's name.
+MAX_STEPS = 10**12
+# Farthest a body may start from the origin, m (10,000 km: any sea). Positions are float64,
+# so even here they resolve to 2 nm, far below any contact overlap.
+MAX_COORDINATE = 1e7
 
 # Body.kind is a BodyKind label; Scene.kinds turns it into the code the kernels compare with.
 _DYNAMIC = BodyKind.DYNAMIC.label

@@ -11,6 +11,8 @@ The same Taichi kernels run on the CPU and on a GPU.
     sim = Simulation(load_scenario("scenarios/pillar.toml"), friction=RateState())
     sim.run(until=20.0, out="runs/pillar_rs.h5")
 
+    ds = open_run("runs/pillar_rs.h5")       # the run file as an xarray Dataset
+
 The scenes of ``scenarios/`` ship with the package: ``load_scenario("pillar")`` loads one from
 any directory.
 
@@ -49,6 +51,7 @@ __all__ = [
     "TaichiIceError",
     "__version__",
     "load_scenario",
+    "open_run",
 ]
 
 
@@ -58,6 +61,10 @@ def __getattr__(name: str) -> Any:
         from .scenario import load_scenario
 
         return load_scenario
+    if name == "open_run":
+        from .io import open_run
+
+        return open_run
     if name == "Simulation":
         from .simulation import Simulation
 

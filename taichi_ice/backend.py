@@ -15,12 +15,20 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import signal
+import subprocess
 import sys
 
 ARCHES = ("cpu", "gpu", "cuda", "vulkan", "metal")
 PRECISIONS = ("f64", "f32")
 
 _current: tuple[str, str] | None = None
+# The arch Taichi actually runs on ("cpu", "cuda", "vulkan", "metal"), read back after start.
+_actual: str | None = None
+# Taichi's names of CPU archs: a GPU arch that fell back runs on one of these.
+_CPU_ARCHES = ("x64", "arm64", "cpu")
+# Seconds a child process may take to start Taichi on a GPU arch (import + driver start).
+PROBE_TIMEOUT = 180.0
 
 # The line ti.init prints unconditionally (taichi/lang/misc.py, a plain print to stdout).
 _START_LINE = "[Taichi] Starting on arch="
@@ -40,6 +48,76 @@ def current_arch():
     return None if _current is None else _current[0]
 
 
+def actual_arch() -> str | None:
+    """The arch Taichi really runs on ('cpu', 'cuda', 'vulkan', 'metal'), or None before
+    ``init``: 'gpu' resolves to a backend, and a backend that fell back reads 'cpu'."""
+    return _actual
+
+
+def _running_arch() -> str:
+    from taichi.lang import impl
+
+    name = impl.current_cfg().arch.name
+    return "cpu" if name in _CPU_ARCHES else name
+
+
+_PROBE = """
+import os, sys
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+import taichi as ti
+ti.init(arch=getattr(ti, sys.argv[1]), log_level=ti.ERROR, offline_cache=False)
+from taichi.lang import impl
+print("ARCH=" + impl.current_cfg().arch.name)
+"""
+
+
+def probe(arch: str) -> str:
+    """Start Taichi on ``arch`` in a child process and return the arch it ran on.
+
+    A missing GPU or driver can crash ``ti.init`` (a segfault on some machines) or make it
+    fall back to the CPU; in a child neither touches this process.
+
+    Raises:
+        BackendError: the child crashed, hung, or fell back to the CPU; the message says
+            what happened and to use ``--arch cpu``.
+    """
+    from .errors import BackendError
+
+    if arch == "cpu":
+        return "cpu"
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _PROBE, arch],
+            capture_output=True,
+            text=True,
+            timeout=PROBE_TIMEOUT,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        raise BackendError(
+            f"--arch {arch}: starting Taichi on it took over {PROBE_TIMEOUT:.0f} s in a test "
+            "process; its driver does not answer: use --arch cpu"
+        ) from None
+    found = [ln[5:] for ln in proc.stdout.splitlines() if ln.startswith("ARCH=")]
+    if proc.returncode != 0 or not found:
+        if proc.returncode < 0:
+            how = f"crashed with {signal.Signals(-proc.returncode).name}"
+        else:
+            tail = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+            how = f"failed ({tail[:200]})"
+        raise BackendError(
+            f"--arch {arch}: Taichi cannot start on it here: a test process {how}; "
+            "this machine has no usable GPU or driver for it: use --arch cpu"
+        )
+    ran = "cpu" if found[-1] in _CPU_ARCHES else found[-1]
+    if ran == "cpu":
+        raise BackendError(
+            f"--arch {arch}: Taichi finds no {arch} device here and would fall back to the "
+            "CPU; use --arch cpu (or run where there is a GPU)"
+        )
+    return ran
+
+
 def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> None:
     """Start Taichi on ``arch`` with ``precision`` as its default float type.
 
@@ -52,7 +130,7 @@ def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> 
         ValueError: unknown arch or precision, or a different arch/precision than the
             running one without ``reinit``.
     """
-    global _current
+    global _current, _actual
     if arch not in ARCHES:
         raise ValueError(f"arch must be one of {ARCHES}, got {arch!r}")
     real_dtype(precision)
@@ -76,6 +154,7 @@ def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> 
             offline_cache=True,
         )
     _current = wanted
+    _actual = _running_arch()
 
 
 @contextlib.contextmanager

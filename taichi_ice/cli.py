@@ -1,24 +1,30 @@
 """The ``taichi-ice`` command (also ``python -m taichi_ice``).
 
-A user's mistake (a bad scene file, an unstable dt, a run that diverged) ends with one line
-on stderr naming what to fix and exit status 2, never a traceback.
+A user's mistake (a bad scene file, an unstable dt, a run that diverged, an output that
+exists or is taken, an arch this machine lacks) ends with one line on stderr naming what to
+fix and exit status 2, never a traceback. SIGTERM (``timeout``, batch schedulers) stops a run
+as Ctrl-C does: its file is closed, marked failed with the reason, and kept.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import re
+import signal
 import sys
 from pathlib import Path
 
 from ._version import __version__
-from .errors import TaichiIceError
+from .errors import Interrupted, TaichiIceError
 
 EXAMPLES = {
     "run": """examples:
   taichi-ice run scenarios/pushed_field.toml --out runs/pushed.h5
   taichi-ice run scenarios/pushed_field.toml --friction rate-state --until 5
-  taichi-ice run scenarios/two_squares.toml --friction coulomb:0.3 --dt 5e-5 --precision f32""",
+  taichi-ice run scenarios/two_squares.toml --friction coulomb:0.3 --dt 5e-5 --precision f32
+  taichi-ice run scenarios/pillar.toml --out runs/p.h5 --checkpoint-every 10min
+  taichi-ice run scenarios/pillar.toml --out runs/p.h5 --resume     # after a kill or failure""",
     "validate": """examples:
   taichi-ice validate --out out/validation          # Figure 3, exact solutions, stability
   taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)
@@ -68,14 +74,37 @@ def parse_dt(text: str):
     return value
 
 
+_DURATION_UNITS = {"": 1.0, "s": 1.0, "min": 60.0, "m": 60.0, "h": 3600.0}
+
+
+def parse_duration(text: str) -> float:
+    """``--checkpoint-every``: wall-clock seconds from ``30s``, ``10min``, ``1h`` or ``90``."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(s|min|m|h|)\s*", text)
+    if not m or not math.isfinite(float(m.group(1))):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: use a wall-clock duration such as 30s, 10min or 1h"
+        )
+    return float(m.group(1)) * _DURATION_UNITS[m.group(2)]
+
+
 def _cmd_run(args) -> int:
+    from . import io
+    from .scenario import load_scenario
+
+    out = args.out or str(Path("runs") / (Path(args.scene).stem + ".h5"))
+    # The output is claimed (checked, locked) before the scene is read or Taichi starts.
+    io.claim(out, overwrite=args.overwrite, resume=args.resume, inputs=[args.scene])
+    try:
+        return _run_scene(args, load_scenario(args.scene), out)
+    finally:
+        io.release(out)
+
+
+def _run_scene(args, scene, out: str) -> int:
     import numpy as np
 
-    from .scenario import load_scenario
     from .simulation import Simulation
 
-    scene = load_scenario(args.scene)
-    out = args.out or str(Path("runs") / (Path(args.scene).stem + ".h5"))
     sim = Simulation(
         scene,
         friction=args.friction,
@@ -86,12 +115,21 @@ def _cmd_run(args) -> int:
         slots=args.slots,
     )
     law = sim.scenes[0].friction
+    ran = sim.arch_used if sim.arch_used == args.arch else f"{sim.arch_used} (--arch {args.arch})"
     print(
         f"{args.scene}: {scene.n_bodies} bodies, {law!r}, dt = {sim.dt:.3g} s "
-        f"(limit {sim.world.stable_dt:.3g} s), {args.arch}/{args.precision}",
+        f"(limit {sim.world.stable_dt:.3g} s), {ran}/{args.precision}"
+        + (f"; {sim.dt_note}" if sim.dt_note else ""),
         file=sys.stderr,
     )
-    result = sim.run(until=args.until, out=out, progress=not args.quiet)
+    result = sim.run(
+        until=args.until,
+        out=out,
+        progress=not args.quiet,
+        overwrite=True,  # claimed above, with --overwrite or not
+        resume=args.resume,
+        checkpoint_every=args.checkpoint_every,
+    )
     e = sim.energies()
     probe = result.series[0]["probe_force"]
     peak = float(np.max(np.linalg.norm(probe, axis=-1))) if probe.size else 0.0
@@ -102,6 +140,7 @@ def _cmd_run(args) -> int:
         f"peak probe force {peak / 1e3:.3g} kN; friction {e['friction_energy']:.4g} J; "
         f"work in {e['work_in']:.4g} J; budget residual {e['residual']:.3g} J "
         f"({100 * e['residual'] / scale:.2f} %)"
+        + (f"; WARNING: {result.warning}" if result.warning else "")
     )
     return 0
 
@@ -244,6 +283,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="accept a dt above the stability limit (for stability studies)",
     )
     p.add_argument("--slots", type=int, default=None, help="contact slots per body")
+    p.add_argument("--overwrite", action="store_true", help="replace the output file if it exists")
+    p.add_argument(
+        "--checkpoint-every",
+        type=parse_duration,
+        default=None,
+        metavar="DURATION",
+        help="write the whole state to OUT.ckpt every DURATION of wall clock (30s, 10min, 1h), "
+        "at a frame, and when stopped by Ctrl-C or SIGTERM",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in --out from its last checkpoint (same scene and options)",
+    )
 
     p = add(
         "validate", "check the friction law against its exact solutions (Figure 3)", _cmd_validate
@@ -331,11 +384,28 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminate(signum, frame) -> None:
+    # SIGTERM outside a run's steps (a run notes it and stops at the end of its stride).
+    raise Interrupted(f"stopped by {signal.Signals(signum).name}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = None
     try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread (a test's, an embedding's): leave it
+        pass
+    try:
+        if getattr(args, "arch", "cpu") not in ("cpu", None):
+            from .backend import probe
+
+            probe(args.arch)  # in a child process: a GPU that crashes ti.init stays there
         return int(args.func(args) or 0)
+    except Interrupted as exc:
+        print(f"taichi-ice: {exc} (files written so far are kept)", file=sys.stderr)
+        return 143 if "SIGTERM" in str(exc) else 130
     except TaichiIceError as exc:
         print(f"taichi-ice: error: {exc}", file=sys.stderr)
         return 2
@@ -345,6 +415,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("taichi-ice: interrupted (files written so far are kept)", file=sys.stderr)
         return 130
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"taichi-ice: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -1,11 +1,19 @@
-"""HDF5 run files: written as the run goes, readable while it runs and after it fails.
+"""Run files: netCDF-4 (HDF5 with dimension scales), written as the run goes, readable while it
+runs, after it fails and after it is killed.
 
 Layout (one file per world; DESIGN.md section 3):
 
-- root attributes: ``taichi_ice_version``, ``scenario`` (the scene's TOML), ``source``,
-  ``friction`` (law name), ``friction_params`` (JSON), ``arch``, ``precision``, ``dt`` (s),
-  ``seed``, ``status`` (``running``, ``complete`` or ``failed``), ``failure`` (why, if
-  failed), ``steps``, ``wall_time`` (s).
+- root attributes: ``Conventions`` (CF), ``format_version``, ``taichi_ice_version``,
+  ``taichi_version``, ``numpy_version``, ``h5py_version``, ``python_version``,
+  ``git_revision``, ``command``, ``host``, ``started`` and ``finished`` (UTC), ``scenario``
+  (the scene's TOML), ``source``, ``friction`` (law name), ``friction_params`` (JSON),
+  ``arch`` (what ran: ``cpu``, ``cuda`` ...), ``arch_requested``, ``precision``, ``dt`` (s),
+  ``stable_dt`` (s), ``seed``, ``status`` (``running``, ``complete`` or ``failed``),
+  ``failure`` (why, if failed), ``warning`` (e.g. a budget residual past its bound),
+  ``steps``, ``wall_time`` (s), ``resumed`` (how many times the run was resumed).
+- root coordinates (netCDF dimensions, shared by the groups): ``body`` (N,), ``probe``
+  (P,: the body index of each probe), ``xy`` (2,: "x", "y"), ``vertex`` (V,), ``body_edge``
+  (N + 1,).
 - ``/series/``: ``time`` (T,), ``probe_force`` (T, P, 2) mean contact force on each probe
   body over the sample interval (N), ``friction_energy``, ``viscous_energy``,
   ``drag_energy``, ``kinetic_energy``, ``elastic_energy``, ``crushing_energy``, ``work_in``
@@ -15,41 +23,350 @@ Layout (one file per world; DESIGN.md section 3):
 - ``/bodies/``: ``names``, ``kinds``, ``vertices`` (V, 2) centroid-relative outlines and
   ``vertex_offsets`` (N + 1,), ``mass`` (kg), ``inertia`` (kg m^2), ``probe_index`` (P,).
 
-The file is opened in SWMR mode (single writer, multiple readers) and flushed after every
-sample, so ``h5py.File(path, "r", swmr=True)`` reads a running file and a killed run leaves
-a consistent file whose ``status`` still says ``running``.
+Every variable has ``units`` (but the strings) and ``long_name``; each group's ``time`` is its
+dimension. ``xarray.open_dataset(path, group="series")`` (and ``"frames"``, ``"bodies"``)
+reads a group with no other option; ``open_run(path)`` returns the whole run as one Dataset.
+
+Writing: rows are kept in memory and written every frame, each time in one short open of
+the file that extends every series together, then closes it. Between writes the file is
+closed and whole, so a reader (``h5py.File(path)``, xarray) sees series of one length, and a
+run killed with SIGKILL leaves a file that opens with no special option (its ``status`` still
+says ``running``). A reader that opens the file at the instant of a write may be refused;
+``read_run`` and ``open_run`` try again.
+
+Output paths are claimed before any work starts (``claim``): an existing file is refused
+unless overwritten on purpose, a folder or an unwritable place is refused with the reason,
+and a lock file (``RUN.h5.lock``) names the process that writes the run, so that a second
+writer is refused with a message naming the first.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import socket
+import time as _time
 from collections.abc import Mapping
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from . import budget
-from ._version import __version__
+from . import budget, provenance
+from .errors import OutputError, RunFileError
+
+# Version of this layout; a reader refuses a file with another major version.
+FORMAT_VERSION = "2.0"
+CONVENTIONS = "CF-1.8"
+
+# (units, long_name) of every variable; "" units for strings (CF gives them none).
+_ENERGY_NAMES = {
+    "friction_energy": "energy dissipated by frictional slip (cumulative)",
+    "viscous_energy": "energy dissipated by the contact dashpots (cumulative)",
+    "drag_energy": "energy dissipated by water drag (cumulative)",
+    "work_in": "work done by kinematic bodies and external forces (cumulative)",
+    "kinetic_energy": "kinetic energy, translational and rotational",
+    "elastic_energy": "elastic energy in overlaps and tangential springs",
+    "crushing_energy": "energy dissipated by crushing beyond the ice strength (cumulative)",
+}
+VARIABLES: dict[str, dict[str, tuple[str, str]]] = {
+    "": {
+        "body": ("1", "body index, in scene order"),
+        "probe": ("1", "body index of each probe body"),
+        "xy": ("", "vector component"),
+        "vertex": ("1", "vertex index in /bodies/vertices"),
+        "body_edge": ("1", "index into /bodies/vertex_offsets"),
+    },
+    "series": {
+        "time": ("s", "time of the sample"),
+        "probe_force": ("N", "mean contact force on each probe body over the sample interval"),
+        "n_contacts": ("1", "contacts in the world after the step"),
+        **{name: ("J", _ENERGY_NAMES.get(name, name.replace("_", " "))) for name in budget.SERIES},
+    },
+    "frames": {
+        "time": ("s", "time of the frame"),
+        "position": ("m", "centroid position"),
+        "angle": ("rad", "orientation, counter-clockwise"),
+        "velocity": ("m s-1", "centroid velocity"),
+        "omega": ("rad s-1", "angular velocity, counter-clockwise"),
+    },
+    "bodies": {
+        "names": ("", "body name"),
+        "kinds": ("", "body kind: dynamic, fixed or kinematic"),
+        "vertices": ("m", "outline vertices relative to the centroid, unrotated"),
+        "vertex_offsets": ("1", "first vertex of each body in vertices (and the end)"),
+        "mass": ("kg", "mass"),
+        "inertia": ("kg m2", "moment of inertia about the centroid"),
+        "probe_index": ("1", "body index of each probe body"),
+    },
+}
+# Dimensions of each variable (the first of a series or frame is its group's time).
+DIMS: dict[str, dict[str, tuple[str, ...]]] = {
+    "series": {"probe_force": ("time", "probe", "xy")},
+    "frames": {
+        "position": ("time", "body", "xy"),
+        "angle": ("time", "body"),
+        "velocity": ("time", "body", "xy"),
+        "omega": ("time", "body"),
+    },
+    "bodies": {
+        "names": ("body",),
+        "kinds": ("body",),
+        "vertices": ("vertex", "xy"),
+        "vertex_offsets": ("body_edge",),
+        "mass": ("body",),
+        "inertia": ("body",),
+        "probe_index": ("probe",),
+    },
+}
+# Attributes every run file has from its start (so a reader always finds them).
+_PLACEHOLDERS = {
+    "status": "running",
+    "failure": "",
+    "warning": "",
+    "steps": 0,
+    "wall_time": 0.0,
+    "finished": "",
+    "resumed": 0,
+}
+
+# A reader that opens a file at the instant the writer extends it may be refused: retry.
+_READ_TRIES = 20
+_READ_PAUSE = 0.05  # s
+
+
+# --------------------------------------------------------------------------------------------
+# Claiming an output path: checks before any work, and a lock naming the writer
+# --------------------------------------------------------------------------------------------
+
+
+def check_output(path: str | Path, overwrite: bool = False, inputs=()) -> Path:
+    """Check that ``path`` can be written as a run file, and make its folder.
+
+    Args:
+        path: the output file.
+        overwrite: allow replacing an existing file.
+        inputs: files the run reads (the scene): never an output.
+
+    Raises:
+        OutputError: the path is a folder, an input, an existing file (without
+            ``overwrite``), below a file, or in a folder that cannot be made or written.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise OutputError(f"{p}: is a folder; give a file name for the output, e.g. {p / 'run.h5'}")
+    for src in inputs:
+        with contextlib.suppress(OSError):
+            if Path(src).exists() and p.exists() and p.resolve() == Path(src).resolve():
+                raise OutputError(
+                    f"{p}: is the scene file the run reads; give another --out (e.g. "
+                    f"{p.with_suffix('.h5')})"
+                )
+    if p.exists() and not overwrite:
+        raise OutputError(
+            f"{p}: exists; pass --overwrite (overwrite=True) to replace it, --resume to "
+            "continue it, or give another --out"
+        )
+    parent = p.parent
+    ancestor = parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if ancestor.exists() and not ancestor.is_dir():
+        raise OutputError(f"{p}: cannot be made: {ancestor} is a file, not a folder")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot make its folder {parent} ({exc.strerror or exc})") from None
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError(f"{p}: the folder {parent} is not writable; give another --out")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise OutputError(f"{p}: exists and is not writable; give another --out")
+    return p
+
+
+class RunLock:
+    """``RUN.h5.lock``: who writes a run file (pid, host, command, since when).
+
+    Made with O_EXCL, so of two processes that claim one path only one succeeds; a lock
+    left by a process of this host that no longer exists is taken over.
+    """
+
+    def __init__(self, target: str | Path):
+        self.target = Path(target)
+        self.path = Path(f"{self.target}.lock")
+        self.held = False
+
+    def acquire(self) -> None:
+        info = {
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "command": provenance.command(),
+            "since": provenance.now(),
+        }
+        for _ in range(3):
+            try:
+                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            except FileExistsError:
+                other = self.owner()
+                if self._stale(other):
+                    with contextlib.suppress(FileNotFoundError):
+                        self.path.unlink()
+                    continue
+                raise OutputError(
+                    f"{self.target}: another run is writing it: pid {other.get('pid', '?')} on "
+                    f"{other.get('host', '?')} since {other.get('since', '?')} "
+                    f"({other.get('command', '?')}); wait for it, or give another --out (if that "
+                    f"run is gone, delete {self.path})"
+                ) from None
+            except OSError as exc:
+                raise OutputError(
+                    f"{self.target}: cannot write in {self.path.parent} ({exc.strerror or exc})"
+                ) from None
+            with os.fdopen(fd, "w") as fh:
+                json.dump(info, fh)
+            self.held = True
+            return
+        raise OutputError(f"{self.target}: cannot take its lock {self.path}; delete it and retry")
+
+    def owner(self) -> dict:
+        """The lock's record (``{}`` if it cannot be read)."""
+        try:
+            return dict(json.loads(self.path.read_text()))
+        except (OSError, ValueError, TypeError):
+            return {}
+
+    @staticmethod
+    def _stale(other: Mapping) -> bool:
+        """True for a lock of this host whose process is gone."""
+        if other.get("host") != socket.gethostname() or not isinstance(other.get("pid"), int):
+            return False
+        if other["pid"] == os.getpid():
+            return False  # this process writes it already (another Simulation)
+        try:
+            os.kill(other["pid"], 0)
+        except ProcessLookupError:
+            return True
+        except PermissionError:
+            return False
+        return False
+
+    def release(self) -> None:
+        if self.held:
+            with contextlib.suppress(FileNotFoundError):
+                self.path.unlink()
+            self.held = False
+
+
+# Claims this process holds, by resolved path: the command line claims its output before
+# the scene is built, and the run that then writes it finds the claim here.
+_CLAIMS: dict[Path, list] = {}
+
+
+def _key(path: Path) -> Path:
+    return path.parent.resolve() / path.name
+
+
+def claim(path: str | Path, overwrite: bool = False, resume: bool = False, inputs=()) -> Path:
+    """Check ``path`` (``check_output``) and lock it for this process; ``release`` frees it.
+
+    A second claim of a path this process holds already passes (it counts). With ``resume``
+    the file must exist (it is continued, not replaced).
+    """
+    p = Path(path)
+    key = _key(p) if p.parent.exists() else None
+    if key is not None and key in _CLAIMS:
+        _CLAIMS[key][1] += 1
+        return p
+    if resume:
+        if not p.is_file():
+            raise OutputError(f"{p}: no such run file to resume; run without --resume first")
+        check_output(p, overwrite=True, inputs=inputs)
+    else:
+        check_output(p, overwrite=overwrite, inputs=inputs)
+    lock = RunLock(p)
+    lock.acquire()
+    _CLAIMS[_key(p)] = [lock, 1]
+    return p
+
+
+def release(path: str | Path) -> None:
+    """Undo one ``claim`` of ``path``; the last one removes the lock."""
+    key = _key(Path(path))
+    entry = _CLAIMS.get(key)
+    if entry is None:
+        return
+    entry[1] -= 1
+    if entry[1] <= 0:
+        entry[0].release()
+        del _CLAIMS[key]
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------------------------
+
+
+def _open_for_write(path: Path) -> h5py.File:
+    # File locking off: the lock file keeps writers apart, and a reader that holds the file
+    # open (xarray keeps it) must not stop the run.
+    return h5py.File(path, "r+", locking=False)
 
 
 class RunWriter:
-    """Appends samples and frames of one world to an HDF5 file.
+    """Appends samples and frames of one world to a run file.
 
     Args:
-        path: output file (its folder is created).
+        path: output file (claimed with ``claim`` first; an existing file is replaced).
         scene: the world's Scene.
         attrs: extra root attributes (arch, precision, dt ...).
+        resume: continue the file at ``path`` instead: its series and frames are cut to
+            ``resume`` = ``(samples, frames)`` rows and it is marked running again.
     """
 
-    def __init__(self, path: str | Path, scene, attrs: Mapping[str, object]):
+    def __init__(
+        self,
+        path: str | Path,
+        scene,
+        attrs: Mapping[str, object],
+        resume: tuple[int, int] | None = None,
+    ):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.series: dict[str, list] = {k: [] for k in ("time", "probe_force", "n_contacts")}
+        self.series.update({k: [] for k in budget.SERIES})
+        self.frames: dict[str, list] = {
+            k: [] for k in ("time", "position", "angle", "velocity", "omega")
+        }
+        if resume is not None:
+            self.n_samples, self.n_frames = resume
+            with _open_for_write(self.path) as f:
+                _check_run_file(f, self.path)
+                for ds in f["series"].values():
+                    ds.resize(self.n_samples, axis=0)
+                for ds in f["frames"].values():
+                    ds.resize(self.n_frames, axis=0)
+                f.attrs["status"] = "running"
+                f.attrs["failure"] = ""
+                f.attrs["resumed"] = int(f.attrs.get("resumed", 0)) + 1
+                for key, value in attrs.items():
+                    if key not in ("started",):
+                        f.attrs[key] = value
+            return
+        self.n_samples = self.n_frames = 0
+        with contextlib.suppress(FileNotFoundError):
+            # Unlink, not truncate: a reader that holds the old file keeps it whole.
+            self.path.unlink()
+        with h5py.File(self.path, "w", track_order=True) as f:
+            self._create(f, scene, attrs)
+
+    def _create(self, f: h5py.File, scene, attrs: Mapping[str, object]) -> None:
         n, p = scene.n_bodies, len(scene.probe_indices)
-        f = h5py.File(self.path, "w", libver="latest")
-        self.file = f
         law = scene.friction
-        f.attrs["taichi_ice_version"] = __version__
+        f.attrs["Conventions"] = CONVENTIONS
+        f.attrs["title"] = f"taichi-ice run of {scene.source}"
+        f.attrs["format_version"] = FORMAT_VERSION
+        for key, value in provenance.run_attributes().items():
+            f.attrs[key] = value
         f.attrs["scenario"] = scene.text
         f.attrs["source"] = str(scene.source)
         f.attrs["friction"] = law.name
@@ -57,44 +374,67 @@ class RunWriter:
         f.attrs["seed"] = scene.simulation.seed
         for key, value in attrs.items():
             f.attrs[key] = value
-        f.attrs["status"] = "running"
-        f.attrs["failure"] = ""
-        f.attrs["steps"] = 0
+        for key, value in _PLACEHOLDERS.items():
+            f.attrs[key] = value
 
-        b = f.create_group("bodies")
+        scales = {
+            "body": np.arange(n, dtype=np.int64),
+            "probe": np.asarray(scene.probe_indices, dtype=np.int64),
+            "xy": np.array(["x", "y"], dtype=h5py.string_dtype()),
+            "vertex": np.arange(len(scene.vertices_flat), dtype=np.int64),
+            "body_edge": np.arange(n + 1, dtype=np.int64),
+        }
+        for name, values in scales.items():
+            ds = f.create_dataset(name, data=values)
+            ds.make_scale(name)
+            _describe(ds, "", name)
+
+        b = f.create_group("bodies", track_order=True)
         b["names"] = np.array(scene.names, dtype=h5py.string_dtype())
         b["kinds"] = np.array([body.kind for body in scene.bodies], dtype=h5py.string_dtype())
-        b["vertices"] = scene.vertices_flat
+        b["vertices"] = np.asarray(scene.vertices_flat, dtype=np.float64).reshape(-1, 2)
         b["vertex_offsets"] = scene.vertex_offsets
         b["mass"] = scene.masses
         b["inertia"] = scene.inertias
-        b["probe_index"] = scene.probe_indices
+        b["probe_index"] = np.asarray(scene.probe_indices, dtype=np.int64)
+        for name, ds in b.items():
+            _describe(ds, "bodies", name)
+            _attach(f, ds, DIMS["bodies"][name])
 
-        s = f.create_group("series")
-        self.series = {
-            "time": _growing(s, "time", ()),
-            "probe_force": _growing(s, "probe_force", (p, 2)),
-            "n_contacts": _growing(s, "n_contacts", (), dtype=np.int64),
+        shapes = {
+            "series": {
+                "time": ((), np.float64),
+                "probe_force": ((p, 2), np.float64),
+                "n_contacts": ((), np.int64),
+                **{k: ((), np.float64) for k in budget.SERIES},
+            },
+            "frames": {
+                "time": ((), np.float64),
+                "position": ((n, 2), np.float64),
+                "angle": ((n,), np.float64),
+                "velocity": ((n, 2), np.float64),
+                "omega": ((n,), np.float64),
+            },
         }
-        for name in budget.SERIES:
-            self.series[name] = _growing(s, name, ())
-        fr = f.create_group("frames")
-        self.frames = {
-            "time": _growing(fr, "time", ()),
-            "position": _growing(fr, "position", (n, 2)),
-            "angle": _growing(fr, "angle", (n,)),
-            "velocity": _growing(fr, "velocity", (n, 2)),
-            "omega": _growing(fr, "omega", (n,)),
-        }
-        f.swmr_mode = True
-        f.flush()
+        for group, variables in shapes.items():
+            g = f.create_group(group, track_order=True)
+            time = _growing(g, "time", (), np.float64)
+            time.make_scale("time")
+            _describe(time, group, "time")
+            for name, (shape, dtype) in variables.items():
+                if name == "time":
+                    continue
+                ds = _growing(g, name, shape, dtype)
+                _describe(ds, group, name)
+                ds.dims[0].attach_scale(time)
+                _attach(f, ds, DIMS.get(group, {}).get(name, ("time",)), skip=1)
 
     def add_sample(self, time: float, probe_force, energies, n_contacts: int) -> None:
         """One time-series row: probe_force (P, 2) N, energies in budget.SERIES order (J)."""
         row = {"time": time, "probe_force": probe_force, "n_contacts": n_contacts}
         row.update(zip(budget.SERIES, energies))
         for name, value in row.items():
-            _append(self.series[name], value)
+            self.series[name].append(np.asarray(value))
 
     def add_frame(self, time: float, position, angle, velocity, omega) -> None:
         """One frame of every body's state."""
@@ -106,25 +446,58 @@ class RunWriter:
             "omega": omega,
         }
         for name, value in row.items():
-            _append(self.frames[name], value)
+            self.frames[name].append(np.array(value, dtype=np.float64))
 
-    def flush(self, steps: int) -> None:
-        self.file.attrs["steps"] = steps
-        self.file.flush()
+    @property
+    def pending(self) -> bool:
+        return bool(self.series["time"] or self.frames["time"])
+
+    def flush(self, steps: int, **attrs) -> None:
+        """Write the rows kept so far, and ``steps`` and ``attrs``, in one open of the file."""
+        with _open_for_write(self.path) as f:
+            self._write(f, steps, attrs)
+
+    def _write(self, f: h5py.File, steps: int, attrs: Mapping[str, object]) -> None:
+        for group, rows, count in (
+            ("series", self.series, "n_samples"),
+            ("frames", self.frames, "n_frames"),
+        ):
+            k = len(rows["time"])
+            if not k:
+                continue
+            start = getattr(self, count)
+            for name, values in rows.items():
+                ds = f[group][name]
+                ds.resize(start + k, axis=0)
+                ds[start : start + k] = np.stack(values)
+                values.clear()
+            setattr(self, count, start + k)
+        f.attrs["steps"] = steps
+        for key, value in attrs.items():
+            f.attrs[key] = value
 
     def close(self, status: str, failure: str = "", **attrs) -> None:
-        """Mark the run ``complete`` or ``failed`` (with the reason) and close the file."""
-        if not self.file.id.valid:
-            return
-        # Attributes cannot be created in SWMR mode, only overwritten: all exist already, or
-        # are written before swmr_mode was set.
-        self.file.attrs["status"] = status
-        self.file.attrs["failure"] = failure
-        for key, value in attrs.items():
-            if key in self.file.attrs:
-                self.file.attrs[key] = value
-        self.file.flush()
-        self.file.close()
+        """Write what is left and mark the run ``complete`` or ``failed`` (with the reason)."""
+        with _open_for_write(self.path) as f:
+            self._write(
+                f,
+                int(attrs.pop("steps", f.attrs.get("steps", 0))),
+                {"status": status, "failure": failure, "finished": provenance.now(), **attrs},
+            )
+
+
+def _describe(ds, group: str, name: str) -> None:
+    units, long_name = VARIABLES.get(group, {}).get(name, ("", name.replace("_", " ")))
+    if units:
+        ds.attrs["units"] = units
+    ds.attrs["long_name"] = long_name
+
+
+def _attach(f: h5py.File, ds, dims: tuple[str, ...], skip: int = 0) -> None:
+    """Attach the root dimension scales ``dims`` to ``ds``'s axes (from axis ``skip``)."""
+    for axis, name in enumerate(dims):
+        if axis >= skip:
+            ds.dims[axis].attach_scale(f[name])
 
 
 def _growing(group, name: str, shape: tuple, dtype=np.float64):
@@ -139,19 +512,57 @@ def _growing(group, name: str, shape: tuple, dtype=np.float64):
     )
 
 
-def _append(dataset, value) -> None:
-    n = dataset.shape[0]
-    dataset.resize(n + 1, axis=0)
-    dataset[n] = value
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+
+def _check_run_file(f: h5py.File, path) -> None:
+    missing = [g for g in ("series", "frames", "bodies") if g not in f]
+    if missing or "status" not in f.attrs:
+        raise RunFileError(
+            f"{path}: an HDF5 file, but not a taichi-ice run file (no "
+            f"{'/' + missing[0] if missing else 'status attribute'}); give a file that "
+            "taichi-ice run wrote"
+        )
+
+
+@contextlib.contextmanager
+def open_file(path: str | Path):
+    """``h5py.File(path, "r")`` of a run file, retried while a writer extends it.
+
+    Raises:
+        RunFileError: no such file, not HDF5, or not a run file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise RunFileError(
+            f"{p}: {'is a folder' if p.is_dir() else 'no such file'}; give a run file (.h5)"
+        )
+    for attempt in range(_READ_TRIES):
+        try:
+            f = h5py.File(p, "r", locking=False)
+            break
+        except OSError as exc:
+            if not h5py.is_hdf5(p):
+                raise RunFileError(f"{p}: not an HDF5 file; give a run file (.h5)") from None
+            if attempt == _READ_TRIES - 1:
+                raise RunFileError(f"{p}: cannot be read ({exc})") from None
+            _time.sleep(_READ_PAUSE)
+    try:
+        _check_run_file(f, p)
+        yield f
+    finally:
+        f.close()
 
 
 def read_run(path: str | Path) -> dict:
     """Everything in a run file as NumPy arrays: ``{"attrs", "series", "frames", "bodies"}``.
 
-    Works on a file that is still being written (SWMR) or whose run failed.
+    Works on a file that is still being written, whose run failed, or was killed.
     """
     out: dict = {}
-    with h5py.File(path, "r", swmr=True) as f:
+    with open_file(path) as f:
         out["attrs"] = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
         for group in ("series", "frames", "bodies"):
             out[group] = {}
@@ -161,3 +572,40 @@ def read_run(path: str | Path) -> dict:
                     data = np.array([x.decode() if isinstance(x, bytes) else x for x in data])
                 out[group][name] = data
     return out
+
+
+def open_run(path: str | Path):
+    """A run file as one ``xarray.Dataset`` (loaded into memory; the file is closed).
+
+    Series keep the dimension ``time``; frames are on ``frame_time`` (their ``time``);
+    bodies on ``body``, ``vertex``, ``body_edge`` and ``probe``; the root attributes (the
+    run's provenance) are the Dataset's. Needs xarray with a netCDF-4 engine
+    (``pip install 'taichi-ice[xarray]'``).
+    """
+    try:
+        import xarray as xr
+    except ImportError:
+        raise RunFileError(
+            "open_run needs xarray: pip install 'taichi-ice[xarray]' (or read_run for NumPy)"
+        ) from None
+    with open_file(path):
+        pass  # the checks and their messages
+    parts = []
+    for attempt in range(_READ_TRIES):
+        try:
+            root = xr.open_dataset(path).load()
+            for group in ("series", "frames", "bodies"):
+                with xr.open_dataset(path, group=group) as ds:
+                    part = ds.load()
+                if group == "frames":
+                    part = part.rename({"time": "frame_time"})
+                parts.append(part)
+            break
+        except (OSError, ValueError):
+            parts = []
+            if attempt == _READ_TRIES - 1:
+                raise
+            _time.sleep(_READ_PAUSE)
+    merged = xr.merge([root, *parts], combine_attrs="override")
+    merged.attrs = dict(root.attrs)
+    return merged

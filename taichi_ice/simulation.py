@@ -10,8 +10,11 @@ output interval is a whole number of steps: frames fall exactly on 0, interval, 
 
 from __future__ import annotations
 
+import contextlib
 import math
+import signal
 import sys
+import threading
 import time as _time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -19,9 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend, budget
-from .errors import DivergenceError, TaichiIceError
+from . import backend, budget, checkpoint
+from . import io as runio
+from .errors import DivergenceError, Interrupted, StabilityError, TaichiIceError, UsageError
 from .io import RunWriter
+
+# A run whose energy budget misses by more than this fraction of the energy that came in is
+# marked with a warning (file attribute ``warning``, ``RunResult.warning``, the summary line).
+# The landed scenes close within 8 % (README); a body 1e12 m out missed by 33 %.
+RESIDUAL_WARNING = 0.1
 
 
 @dataclass
@@ -33,6 +42,8 @@ class RunResult:
         paths: HDF5 files written (empty if ``out`` was None).
         steps: steps taken. dt: time step (s). wall_time: seconds of wall clock.
         status: 'complete' or 'failed'. failure: the error message if failed.
+        warning: why the result is suspect ("" if not): a budget residual past
+            ``RESIDUAL_WARNING``.
     """
 
     series: list[dict[str, np.ndarray]]
@@ -42,6 +53,7 @@ class RunResult:
     wall_time: float = 0.0
     status: str = "complete"
     failure: str = ""
+    warning: str = ""
 
     def __getattr__(self, name):
         # A single scene reads like its only world: result.time, result.friction_energy ...
@@ -55,7 +67,8 @@ class Simulation:
     """A scene, or a batch of independent scenes, on the Taichi fields of one World.
 
     Args:
-        scene: a Scene, or a sequence of Scenes run together as independent worlds.
+        scene: a Scene, a scene file's path, or a sequence of Scenes run together as
+            independent worlds.
         friction: a ``Coulomb`` or ``RateState`` law that replaces the scenes' own.
         arch: 'cpu' or 'gpu'. precision: 'f64' or 'f32'.
         dt: time step (s) overriding the scenes' (still refused above the stability limit
@@ -76,16 +89,51 @@ class Simulation:
         slots: int | None = None,
         stepping: str = "auto",
     ):
+        from .limits import check_size
+        from .scene import Scene
         from .world import World
 
+        if isinstance(scene, (str, Path)):
+            from .scenario import load_scenario
+
+            scene = load_scenario(scene)
         scenes = list(scene) if isinstance(scene, Sequence) else [scene]
+        if not scenes:
+            raise UsageError("Simulation needs at least one scene; got an empty sequence")
+        for s in scenes:
+            if not isinstance(s, Scene):
+                raise UsageError(
+                    f"Simulation takes Scenes (load_scenario(path)) or a scene file's path, "
+                    f"got {type(s).__name__}"
+                )
+        check_size(
+            sum(s.n_bodies for s in scenes),
+            f"a batch of {len(scenes)} scene(s)",
+            fix="run fewer worlds at a time, or smaller scenes",
+        )
         if friction is not None:
             scenes = [s.with_friction(friction) for s in scenes]
         self.scenes = scenes
         self.arch, self.precision = arch, precision
-        backend.init(arch, precision)
         first = scenes[0].simulation
+        if dt is not None:
+            if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)):
+                raise UsageError(f"dt must be a number of seconds, got {dt!r}")
+            if not (0.0 < dt < math.inf):
+                raise UsageError(f"dt = {dt!r}: use a positive finite time step in seconds")
+            limit = min(s.stable_dt for s in scenes)
+            if dt > limit and not force_dt:
+                raise StabilityError(
+                    f"dt = {dt:g} s is above the stability limit {limit:.4g} s of the contact "
+                    f"integration (stiffest contact of the lightest dynamic body); use a dt "
+                    "below it, dt = None for the scene's, or force_dt (--force-dt) for a "
+                    "stability study"
+                )
+        backend.init(arch, precision)
+        # What Taichi actually runs on (a GPU arch resolves to cuda, vulkan or metal).
+        self.arch_used = backend.actual_arch() or arch
         requested = dt if dt is not None else min(s.dt for s in scenes)
+        self.dt_requested = float(requested)
         # Whole steps per output interval, so frames land on multiples of the interval; and
         # when the series interval divides it (the usual case), whole steps per sample too,
         # so samples land on multiples of theirs (and on every frame).
@@ -100,6 +148,13 @@ class Simulation:
             self.series_every = 0
         self.dt = first.output_interval / self.frame_every
         self.series_every = self.series_every or max(1, round(first.series_interval / self.dt))
+        # Said, never silent: the step was shortened so that samples fall on whole steps.
+        self.dt_note = ""
+        if not math.isclose(self.dt, requested, rel_tol=1e-9):
+            self.dt_note = (
+                f"dt {requested:.4g} s shortened to {self.dt:.4g} s: a whole number of steps "
+                f"per sample ({first.series_interval:g} s) and frame ({first.output_interval:g} s)"
+            )
         self.world = World(
             scenes,
             dt=self.dt,
@@ -156,63 +211,155 @@ class Simulation:
         until: float | None = None,
         out: str | Path | Sequence[str | Path] | None = None,
         progress: bool = False,
+        *,
+        overwrite: bool = True,
+        resume: bool = False,
+        checkpoint_every: float | None = None,
     ) -> RunResult:
         """Run to ``until`` (s; default the scene's duration), sampling series and frames.
 
         Args:
-            until: end time (s), measured from t = 0 of the scene.
-            out: HDF5 file (one scene) or one file per world (a batch); None writes nothing.
+            until: end time (s), measured from t = 0 of the scene: a second ``run`` continues
+                from where the first stopped, to this time.
+            out: run file (one scene) or one file per world (a batch); None writes nothing.
             progress: show a progress bar on stderr.
+            overwrite: replace an existing ``out`` (the command line asks ``--overwrite``);
+                False refuses it. Two writers of one path are always refused (a lock file).
+            resume: continue the run in ``out`` from its checkpoint (``out`` + ".ckpt"):
+                the state is restored, rows written after the checkpoint are cut, and the
+                run goes on, bit for bit as if it had never stopped.
+            checkpoint_every: seconds of wall clock between checkpoints (taken at frames),
+                0 for every frame; None for none. Needs ``out``.
 
         Returns:
             RunResult with the series of every world.
 
         Raises:
-            DivergenceError, CapacityError: the run stopped; every file written so far is
-                closed with status 'failed' and the reason, and stays readable.
+            DivergenceError, CapacityError, Interrupted (SIGINT or SIGTERM): the run stopped;
+                every file written so far is closed with status 'failed' and the reason, and
+                stays readable.
+            OutputError: ``out`` exists (without ``overwrite``), is taken by another run, or
+                cannot be written; raised before any step.
         """
-        until = self.scenes[0].simulation.duration if until is None else float(until)
-        n_total = round(until / self.dt)
+        until = self._end_time(until)
         paths = _paths(out, len(self.scenes))
+        if (resume or checkpoint_every is not None) and not paths:
+            raise UsageError("checkpoints and resume need an output file (out=...)")
+        if checkpoint_every is not None and not checkpoint_every >= 0:
+            raise UsageError(f"checkpoint_every = {checkpoint_every!r}: use seconds, 0 or more")
+        claimed: list[Path] = []
+        try:
+            for p in paths:
+                runio.claim(p, overwrite=overwrite, resume=resume)
+                claimed.append(p)
+            return self._run(until, paths, progress, resume, checkpoint_every)
+        finally:
+            for p in claimed:
+                runio.release(p)
+
+    def _end_time(self, until) -> float:
+        if until is None:
+            return self.scenes[0].simulation.duration
+        try:
+            until = float(until)
+        except (TypeError, ValueError):
+            raise UsageError(f"until = {until!r}: use an end time in seconds") from None
+        if not (0.0 < until < math.inf):
+            raise UsageError(f"until = {until!r}: use a positive finite end time in seconds")
+        if round(until / self.dt) < self.world.steps:
+            raise UsageError(
+                f"until = {until:g} s is before the simulation's time {self.time:g} s; "
+                "until is measured from t = 0 of the scene"
+            )
+        return until
+
+    def _run(self, until, paths, progress, resume, checkpoint_every) -> RunResult:
+        n_end = round(until / self.dt)
         attrs = {
-            "arch": self.arch,
+            "arch": self.arch_used,
+            "arch_requested": self.arch,
             "precision": self.precision,
             "dt": self.dt,
+            "dt_requested": self.dt_requested,
             "stable_dt": self.world.stable_dt,
             "wall_time": 0.0,
         }
-        # No ``out``: no files; otherwise _paths gave one path per scene.
-        writers = [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes)] if paths else []
         series: list[dict[str, list]] = [
             {k: [] for k in ("time", "probe_force", "n_contacts", *budget.SERIES)}
             for _ in self.scenes
         ]
-        bar = Progress(n_total, self.dt, enabled=progress)
-        start = _time.perf_counter()
-        status, failure = "complete", ""
-        try:
-            self._sample(series, writers, sample_dt=self.series_every * self.dt)
-            self._frame(writers)
-            k = 0
-            while k < n_total:
-                # Step to the next sample, frame or the end in one go (World.advance: one
-                # launch for all of them when the worlds are stepped a thread each).
-                stride = min(
-                    self.series_every - k % self.series_every,
-                    self.frame_every - k % self.frame_every,
-                    n_total - k,
+        ckpt_path = checkpoint.path_for(paths[0]) if paths else None
+        if resume:
+            ckpt = checkpoint.read(ckpt_path)
+            checkpoint.restore(self, ckpt, ckpt_path)
+            rows = list(zip(ckpt["attrs"]["n_samples"], ckpt["attrs"]["n_frames"]))
+            writers = [
+                RunWriter(p, s, attrs, resume=r) for p, s, r in zip(paths, self.scenes, rows)
+            ]
+            for s, writer in zip(series, writers):
+                old = runio.read_run(writer.path)["series"]
+                for key in s:
+                    s[key].extend(old[key][: writer.n_samples])
+            if n_end < self.world.steps:
+                raise UsageError(
+                    f"until = {until:g} s is before the checkpoint's time {self.time:g} s"
                 )
-                self.world.advance(stride)
-                k += stride
-                if k % self.series_every == 0 or k == n_total:
-                    self.world.check()
-                    steps_since = k % self.series_every or self.series_every
-                    self._sample(series, writers, sample_dt=steps_since * self.dt)
-                    bar.update(k)
-                if k % self.frame_every == 0:
+        else:
+            writers = [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes)]
+        bar = Progress(n_end, self.dt, enabled=progress)
+        start = _time.perf_counter()
+        last_checkpoint = _time.monotonic()
+        status, failure, warning = "complete", "", ""
+        stop = _StopRequest()
+        try:
+            with stop.deferring():
+                if not resume:
+                    self._sample(series, writers, sample_dt=self.series_every * self.dt)
                     self._frame(writers)
+                k = self.world.steps
+                while k < n_end:
+                    # Step to the next sample, frame or the end in one go (World.advance: one
+                    # launch for all of them when the worlds are stepped a thread each).
+                    stride = min(
+                        self.series_every - k % self.series_every,
+                        self.frame_every - k % self.frame_every,
+                        n_end - k,
+                    )
+                    self.world.advance(stride)
+                    k += stride
+                    if k % self.series_every == 0 or k == n_end:
+                        self.world.check()
+                        steps_since = k % self.series_every or self.series_every
+                        self._sample(series, writers, sample_dt=steps_since * self.dt)
+                        bar.update(k)
+                    if k % self.frame_every == 0:
+                        self._frame(writers)
+                        for w in writers:
+                            w.flush(self.world.steps)
+                        due = checkpoint_every is not None and (
+                            _time.monotonic() - last_checkpoint >= checkpoint_every
+                        )
+                        if due and k < n_end:
+                            self._checkpoint(ckpt_path, writers)
+                            last_checkpoint = _time.monotonic()
+                    if stop.signal is not None:
+                        if checkpoint_every is not None:
+                            for w in writers:
+                                w.flush(self.world.steps)
+                            self._checkpoint(ckpt_path, writers)
+                        raise Interrupted(
+                            f"stopped by {stop.signal} at t = {self.time:.4g} s"
+                            + (
+                                "; continue it with --resume (resume=True)"
+                                if checkpoint_every is not None
+                                else ""
+                            )
+                        )
+                if checkpoint_every is not None:
                     for w in writers:
                         w.flush(self.world.steps)
+                    self._checkpoint(ckpt_path, writers)
+            warning = self._budget_warning()
         except (TaichiIceError, KeyboardInterrupt) as exc:
             status = "failed"
             failure = str(exc) or type(exc).__name__
@@ -223,8 +370,34 @@ class Simulation:
             wall = _time.perf_counter() - start
             bar.close()
             for w in writers:
-                w.close(status, failure, steps=self.world.steps, wall_time=wall)
-        return self._result(series, paths, status, failure, start)
+                w.close(status, failure, steps=self.world.steps, wall_time=wall, warning=warning)
+        result = self._result(series, paths, status, failure, start)
+        result.warning = warning
+        return result
+
+    def _checkpoint(self, path: Path, writers) -> None:
+        checkpoint.write(self, path, [w.n_samples for w in writers], [w.n_frames for w in writers])
+
+    def _budget_warning(self) -> str:
+        """A warning when a world's energy budget misses by more than RESIDUAL_WARNING."""
+        now = self.world.energies()
+        worst, where = 0.0, 0
+        for w in range(len(self.scenes)):
+            rel = float(
+                budget.relative_residual(
+                    budget.as_series(now[w]), budget.as_series(self.initial_energy[w])
+                )
+            )
+            if abs(rel) > abs(worst):  # NaN (nothing came in) never counts
+                worst, where = rel, w
+        if abs(worst) <= RESIDUAL_WARNING:
+            return ""
+        label = f"world {where}" if len(self.scenes) > 1 else "the run"
+        return (
+            f"{label}'s energy budget misses by {100 * worst:.3g} % of the energy in (bound "
+            f"{100 * RESIDUAL_WARNING:g} %): the result is suspect; lower dt, or check the "
+            "scene (a body far from the others, a tiny block)"
+        )
 
     def _result(self, series, paths, status: str, failure: str, start: float) -> RunResult:
         return RunResult(
@@ -286,6 +459,38 @@ def _paths(out, n_worlds: int) -> list[Path]:
     if len(paths) != n_worlds:
         raise ValueError(f"{len(paths)} output paths for {n_worlds} worlds")
     return paths
+
+
+class _StopRequest:
+    """SIGINT and SIGTERM while a run steps: noted, and acted on at the end of the stride.
+
+    The run then stops at a consistent state: its files closed with the reason and, when it
+    takes checkpoints, a last checkpoint to resume from. Only the main thread can catch
+    signals; elsewhere the handlers are left as they are.
+    """
+
+    SIGNALS = ("SIGINT", "SIGTERM")
+
+    def __init__(self):
+        self.signal: str | None = None
+
+    def _note(self, signum, frame) -> None:
+        self.signal = signal.Signals(signum).name
+
+    @contextlib.contextmanager
+    def deferring(self):
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = {}
+        for name in self.SIGNALS:
+            sig = getattr(signal, name)
+            previous[sig] = signal.signal(sig, self._note)
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, signal.SIG_DFL if handler is None else handler)
 
 
 class Progress:

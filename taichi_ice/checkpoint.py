@@ -1,0 +1,170 @@
+"""Checkpoints: the whole state of a run, so that a killed run continues bit for bit.
+
+A checkpoint is an HDF5 file beside the run file (``RUN.h5.ckpt``), written whole to
+``RUN.h5.ckpt.tmp`` and then renamed over the last one (``os.replace``, atomic on POSIX): a
+kill at any instant leaves the previous checkpoint or the new one, never a part of one.
+
+What it holds is read from the engine, not listed here, so that it follows the state's
+declaration (``taichi_ice.schema``) as fields come and go:
+
+- ``/data/<name>``: every field of the batch's mutable state (``World.data``: positions,
+  velocities, contact memory with theta and spring stretch, energy accumulators, probe
+  impulses, status word ...), as ``to_numpy`` gives it;
+- ``/nbr/<name>``: the neighbour lists (``World.neighbours``), so that they are rebuilt at the
+  same steps as in a run that was never stopped;
+- ``/host/initial_energy``: the energy table at t = 0 (the budget's starting capital);
+- attributes: ``steps``, ``time``, ``cur`` (the contact buffer of the last step, when the
+  world has one), ``dt``, ``precision``, ``n_samples`` and ``n_frames`` (rows of each run file
+  written when it was taken, JSON lists), ``scenarios`` and ``frictions`` (JSON lists: a resume
+  must be the same run), ``format_version`` and ``written`` (UTC).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from . import provenance
+from .errors import RunFileError
+
+FORMAT_VERSION = "1"
+SUFFIX = ".ckpt"
+
+
+def path_for(run_path: str | Path) -> Path:
+    """The checkpoint of a run file: ``RUN.h5`` -> ``RUN.h5.ckpt``."""
+    return Path(f"{run_path}{SUFFIX}")
+
+
+def _fields(container) -> dict:
+    """``{name: Taichi field}`` of a ``state.Fields`` group."""
+    return {name: getattr(container, name) for name in container.names}
+
+
+def identity(sim) -> dict:
+    """What a resumed run must share with the run it continues (JSON-able)."""
+    return {
+        "scenarios": [s.text for s in sim.scenes],
+        "frictions": [json.dumps(s.friction.to_dict(), sort_keys=True) for s in sim.scenes],
+        "dt": float(sim.dt),
+        "precision": sim.precision,
+    }
+
+
+def write(sim, path: str | Path, n_samples, n_frames) -> Path:
+    """Write ``sim``'s whole state to ``path`` atomically (write, fsync, rename)."""
+    path = Path(path)
+    world = sim.world
+    tmp = path.with_name(path.name + ".tmp")
+    with h5py.File(tmp, "w") as f:
+        for group, container in (("data", world.data), ("nbr", world.neighbours)):
+            g = f.create_group(group)
+            for name, field in _fields(container).items():
+                g.create_dataset(name, data=field.to_numpy())
+        f.create_group("host").create_dataset("initial_energy", data=sim.initial_energy)
+        ident = identity(sim)
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["written"] = provenance.now()
+        f.attrs["steps"] = int(world.steps)
+        f.attrs["time"] = float(world.time)
+        if hasattr(world, "cur"):
+            f.attrs["cur"] = int(world.cur)
+        f.attrs["dt"] = ident["dt"]
+        f.attrs["precision"] = ident["precision"]
+        f.attrs["scenarios"] = json.dumps(ident["scenarios"])
+        f.attrs["frictions"] = json.dumps(ident["frictions"])
+        f.attrs["n_samples"] = json.dumps([int(n) for n in n_samples])
+        f.attrs["n_frames"] = json.dumps([int(n) for n in n_frames])
+    with open(tmp, "rb") as fh:
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    return path
+
+
+def read(path: str | Path) -> dict:
+    """A checkpoint as ``{"attrs": {...}, "data": {...}, "nbr": {...}, "host": {...}}``.
+
+    Raises:
+        RunFileError: no checkpoint, or not a checkpoint file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RunFileError(
+            f"{path}: no checkpoint to resume from; the run wrote none (run with "
+            "--checkpoint-every, e.g. 10min), or it was never started"
+        )
+    try:
+        with h5py.File(path, "r") as f:
+            out = {
+                "attrs": {
+                    k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()
+                }
+            }
+            for group in ("data", "nbr", "host"):
+                out[group] = {name: ds[()] for name, ds in f[group].items()}
+    except (OSError, KeyError) as exc:
+        raise RunFileError(f"{path}: not a taichi-ice checkpoint ({exc})") from None
+    for key in ("scenarios", "frictions", "n_samples", "n_frames"):
+        out["attrs"][key] = json.loads(out["attrs"][key])
+    return out
+
+
+def restore(sim, ckpt: dict, where: str | Path) -> None:
+    """Put a checkpoint's state into ``sim`` (same scenes, dt, precision: checked).
+
+    Raises:
+        RunFileError: the checkpoint is of another run, or its fields do not fit.
+    """
+    a = ckpt["attrs"]
+    ident = identity(sim)
+    for key, now, then in (
+        ("scene", ident["scenarios"], a["scenarios"]),
+        ("friction law", ident["frictions"], a["frictions"]),
+        ("dt", ident["dt"], float(a["dt"])),
+        ("precision", ident["precision"], a["precision"]),
+    ):
+        if now != then:
+            raise RunFileError(
+                f"{where}: the checkpoint is of another run (its {key} differs from this "
+                "one's); resume with the same scene and options, or start anew with --overwrite"
+            )
+    world = sim.world
+    for group, container in (("data", world.data), ("nbr", world.neighbours)):
+        fields = _fields(container)
+        saved = ckpt[group]
+        if set(saved) != set(fields):
+            raise RunFileError(
+                f"{where}: the checkpoint's state ({sorted(set(saved) ^ set(fields))} differ) "
+                "is of another version of taichi-ice; start anew with --overwrite"
+            )
+        for name, field in fields.items():
+            array = np.asarray(saved[name])
+            if tuple(array.shape) != tuple(field.to_numpy().shape):
+                raise RunFileError(
+                    f"{where}: field {name} has shape {array.shape} in the checkpoint; this "
+                    "run's is other: start anew with --overwrite"
+                )
+            if tuple(field.shape) == ():  # a scalar field reads back as (1,)
+                field[None] = array.reshape(-1)[0].item()
+            else:
+                field.from_numpy(np.ascontiguousarray(array))
+    sim.initial_energy = np.asarray(ckpt["host"]["initial_energy"]).copy()
+    world.steps = int(a["steps"])
+    world.time = world.steps * world.dt
+    if "cur" in a and hasattr(world, "cur"):
+        world.cur = int(a["cur"])
+
+
+def remove(path: str | Path) -> None:
+    """Delete a checkpoint (a run that completed needs none)."""
+    for p in (Path(path), Path(path).with_name(Path(path).name + ".tmp")):
+        with contextlib.suppress(FileNotFoundError):
+            p.unlink()
+
+
+__all__ = ["FORMAT_VERSION", "SUFFIX", "identity", "path_for", "read", "remove", "restore", "write"]

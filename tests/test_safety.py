@@ -345,3 +345,16 @@ def test_simulation_refuses_an_empty_batch_and_things_that_are_not_scenes():
         Simulation([])
     with pytest.raises(UsageError, match="Scenes"):
         Simulation([42])
+
+
+@pytest.mark.parametrize("kind", ["text", "foreign hdf5", "missing"])
+def test_plot_of_a_file_that_is_not_a_run_is_one_line(tmp_path, capsys, kind):
+    path = tmp_path / "x.h5"
+    if kind == "text":
+        path.write_text("not a run")
+    elif kind == "foreign hdf5":
+        with h5py.File(path, "w") as f:
+            f["data"] = np.arange(3)
+    assert main(["plot", str(path)]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert str(path) in line and "run file" in line

@@ -290,11 +290,10 @@ class ContactStage(Stage):
         p = ti.Matrix.zero(self.layout.real, self.maxv, 2)
         x = ti.cast(d.body_pos[i] - origin, self.layout.real)  # positions are f64
         start, count = m.body_vert_start[i], m.body_vert_count[i]
-        for k in ti.static(range(self.maxv)):
-            if k < count:
-                v = d.vert_turned[start + k]
-                p[k, 0] = x[0] + v[0]
-                p[k, 1] = x[1] + v[1]
+        for k in range(count):
+            v = d.vert_turned[start + k]
+            p[k, 0] = x[0] + v[0]
+            p[k, 1] = x[1] + v[1]
         return p, count
 
     @ti.func

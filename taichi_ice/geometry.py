@@ -423,49 +423,44 @@ def min_penetration_axis_ti(p, n_p, q, n_q):
         when separated; axis a unit 2-vector from ``p`` toward ``q``.
     """
     # Stops at the first separating axis: most candidate pairs of a dense field are near
-    # misses, and the depth of a separated pair only matters by its sign. The loops run over
-    # the matrices' static sizes, guarded by the vertex counts: unrolled, every row index a
-    # constant (as in the clip and the crossings below), the narrow phase of a field of
-    # diamonds ran 1.35-1.4x faster than with loops to the counts, bit for bit the same.
+    # misses, and the depth of a separated pair only matters by its sign.
     depth = 0.0
     axis = ti.math.vec2(0.0, 0.0)
-    for k in ti.static(range(p.n)):
-        if k < n_p and (k == 0 or depth > 0.0):
-            d, n = _edge_penetration_ti(p, n_p, q, n_q, k)
-            if ti.static(k == 0):
-                depth, axis = d, n
-            elif d < depth:
-                depth, axis = d, n
+    for k in range(n_p):
+        d, n = _edge_penetration_ti(p, n_p, q, n_q, k)
+        if k == 0 or d < depth:
+            depth, axis = d, n
+        if depth <= 0.0:
+            break
     if depth > 0.0:
-        for k in ti.static(range(q.n)):
-            if k < n_q and depth > 0.0:
-                d, n = _edge_penetration_ti(q, n_q, p, n_p, k)
-                if d < depth:
-                    depth, axis = d, -n
+        for k in range(n_q):
+            d, n = _edge_penetration_ti(q, n_q, p, n_p, k)
+            if d < depth:
+                depth, axis = d, -n
+            if depth <= 0.0:
+                break
     return depth, axis
 
 
 @ti.func
-def _next_row(m, n, k: ti.template()):
-    """Row ``k + 1`` of a local ``(P, 2)`` matrix holding an ``n``-gon, wrapping to row 0
-    (``k`` a constant, ``n`` a variable)."""
-    out = _row(m, 0)
-    if ti.static(k + 1 < m.n):
-        out = ti.select(k + 1 < n, _row(m, k + 1), out)
-    return out
+def _after(k, n):
+    """The vertex after ``k`` of an ``n``-gon (an integer modulo costs tens of cycles)."""
+    k1 = k + 1
+    if k1 == n:
+        k1 = 0
+    return k1
 
 
 @ti.func
-def _edge_penetration_ti(own, n_own, other, n_other, k: ti.template()):
+def _edge_penetration_ti(own, n_own, other, n_other, k):
     """How far ``other`` reaches past edge ``k`` of ``own`` along its outward unit normal
     (m; <= 0: that edge's line separates them), and the normal."""
     a = _row(own, k)
-    e = _next_row(own, n_own, k) - a
+    e = _row(own, _after(k, n_own)) - a
     n = ti.math.vec2(e[1], -e[0]).normalized()
     lowest = ti.math.dot(n, _row(other, 0) - a)
-    for j in ti.static(range(1, other.n)):
-        if j < n_other:
-            lowest = ti.min(lowest, ti.math.dot(n, _row(other, j) - a))
+    for j in range(1, n_other):
+        lowest = ti.min(lowest, ti.math.dot(n, _row(other, j) - a))
     return -lowest, n
 
 
@@ -493,45 +488,43 @@ def _clip_ti(p, n_p, q, n_q):
     """
     cap = ti.static(p.n + q.n)
     buf = ti.Matrix.zero(float, 2 * cap, 2)
-    for k in ti.static(range(p.n)):
-        if k < n_p:
-            buf[k, 0] = p[k, 0]
-            buf[k, 1] = p[k, 1]
+    for k in range(n_p):
+        buf[k, 0] = p[k, 0]
+        buf[k, 1] = p[k, 1]
     src = 0
     count = n_p
-    for e in ti.static(range(q.n)):
-        if e < n_q:
-            c = _row(q, e)
-            edge = _next_row(q, n_q, e) - c
-            dst = cap - src
-            out = 0
-            # Edge (a, b) of the current polygon for k = 0 .. count - 1, b wrapping to the
-            # first vertex; each vertex's side of the clip line is computed once.
-            first = _row(buf, src)
-            s_first = _cross_ti(edge, first - c)
-            a = first
-            sa = s_first
-            for k in range(count):
-                b = first
-                sb = s_first
-                if k + 1 < count:
-                    b = _row(buf, src + k + 1)
-                    sb = _cross_ti(edge, b - c)
-                if (sa >= 0.0) != (sb >= 0.0):
-                    x = a + (sa / (sa - sb)) * (b - a)
-                    if out < cap:
-                        buf[dst + out, 0] = x[0]
-                        buf[dst + out, 1] = x[1]
-                    out += 1
-                if sb >= 0.0:
-                    if out < cap:
-                        buf[dst + out, 0] = b[0]
-                        buf[dst + out, 1] = b[1]
-                    out += 1
-                a = b
-                sa = sb
-            src = dst
-            count = ti.min(out, cap)
+    for e in range(n_q):
+        c = _row(q, e)
+        edge = _row(q, _after(e, n_q)) - c
+        dst = cap - src
+        out = 0
+        # Edge (a, b) of the current polygon for k = 0 .. count - 1, b wrapping to the first
+        # vertex; each vertex's side of the clip line is computed once.
+        first = _row(buf, src)
+        s_first = _cross_ti(edge, first - c)
+        a = first
+        sa = s_first
+        for k in range(count):
+            b = first
+            sb = s_first
+            if k + 1 < count:
+                b = _row(buf, src + k + 1)
+                sb = _cross_ti(edge, b - c)
+            if (sa >= 0.0) != (sb >= 0.0):
+                x = a + (sa / (sa - sb)) * (b - a)
+                if out < cap:
+                    buf[dst + out, 0] = x[0]
+                    buf[dst + out, 1] = x[1]
+                out += 1
+            if sb >= 0.0:
+                if out < cap:
+                    buf[dst + out, 0] = b[0]
+                    buf[dst + out, 1] = b[1]
+                out += 1
+            a = b
+            sa = sb
+        src = dst
+        count = ti.min(out, cap)
     return buf, src, count
 
 
@@ -584,26 +577,24 @@ def overlap_ti(p, n_p, q, n_q):
             entering_count = 0
             enter = ti.math.vec2(0.0, 0.0)
             leave = ti.math.vec2(0.0, 0.0)
-            for i in ti.static(range(p.n)):
-                if i < n_p:
-                    a = _row(p, i)
-                    ab = _next_row(p, n_p, i) - a
-                    for j in ti.static(range(q.n)):
-                        if j < n_q:
-                            c = _row(q, j)
-                            cd = _next_row(q, n_q, j) - c
-                            sa = _cross_ti(cd, a - c)
-                            sb = _cross_ti(cd, a + ab - c)
-                            tc = _cross_ti(ab, c - a)
-                            td = _cross_ti(ab, c + cd - a)
-                            if ((sa > 0.0) != (sb > 0.0)) and ((tc > 0.0) != (td > 0.0)):
-                                x = a + (sa / (sa - sb)) * ab
-                                if sb > 0.0:
-                                    entering_count += 1
-                                    enter = x
-                                else:
-                                    leave = x
-                                crossings += 1
+            for i in range(n_p):
+                a = _row(p, i)
+                ab = _row(p, _after(i, n_p)) - a
+                for j in range(n_q):
+                    c = _row(q, j)
+                    cd = _row(q, _after(j, n_q)) - c
+                    sa = _cross_ti(cd, a - c)
+                    sb = _cross_ti(cd, a + ab - c)
+                    tc = _cross_ti(ab, c - a)
+                    td = _cross_ti(ab, c + cd - a)
+                    if ((sa > 0.0) != (sb > 0.0)) and ((tc > 0.0) != (td > 0.0)):
+                        x = a + (sa / (sa - sb)) * ab
+                        if sb > 0.0:
+                            entering_count += 1
+                            enter = x
+                        else:
+                            leave = x
+                        crossings += 1
             chord = enter - leave
             chord_length = chord.norm()
             if crossings == 2 and entering_count == 1 and chord_length > 0.0:

@@ -24,6 +24,7 @@ from . import geometry
 from .codes import BodyKind, ThetaMethod
 from .drag import drag_coefficients
 from .errors import ScenarioError, StabilityError
+from .scene import MAX_VERTICES
 from .schema import SCAN, HostArrays, Layout
 
 # Contact slots per body beyond the large bodies of its world. A convex block in a dense
@@ -44,8 +45,9 @@ RUNAWAY_STEP_FRACTION = 0.25
 SKIN_FRACTION = 0.05
 LIST_SLOTS = 3
 
-# Largest polygon the contact kernel compiles for (its clip buffers are 2 MAXV long).
-MAX_VERTS_LIMIT = 16
+# Largest polygon the contact kernel compiles for (its clip buffers are 2 MAXV long); scenes
+# are held to it when they are read (scene.MAX_VERTICES), batches built by hand here.
+MAX_VERTS_LIMIT = MAX_VERTICES
 
 
 @dataclass(frozen=True)

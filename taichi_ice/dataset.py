@@ -24,32 +24,19 @@ Layout of ``sweep.nc``:
 from __future__ import annotations
 
 import math
-import platform
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from ._version import __version__
 from .ensemble import METRIC_INFO
+from .provenance import versions
 
 __all__ = ["build_dataset", "open_sweep", "write_dataset"]
 
 # xarray's netCDF engine for netCDF-4 files.
 ENGINE = "netcdf4"
-
-
-def _versions() -> dict[str, str]:
-    from importlib import metadata
-
-    out = {"taichi_ice_version": __version__, "python_version": platform.python_version()}
-    for dist in ("taichi", "numpy", "dask", "distributed", "xarray", "netCDF4"):
-        try:
-            out[f"{dist}_version"] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            out[f"{dist}_version"] = "not installed"
-    return out
 
 
 def build_dataset(sweep, worlds: Sequence, results: Mapping[str, dict], arch: str, precision: str):
@@ -135,7 +122,7 @@ def build_dataset(sweep, worlds: Sequence, results: Mapping[str, dict], arch: st
         "window_s": float(sweep.window),
         "arch": arch,
         "precision": precision,
-        **_versions(),
+        **versions(("dask", "distributed", "xarray", "netCDF4")),
     }
     return xr.Dataset(data_vars=data, coords=coords, attrs=attrs)
 

@@ -24,11 +24,12 @@ def now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def versions() -> dict[str, str]:
+def versions(extra: tuple[str, ...] = ()) -> dict[str, str]:
     """``{"taichi_ice_version", "taichi_version", "numpy_version", "h5py_version",
-    "python_version"}``; a library that is not installed reads "not installed"."""
+    "python_version"}`` and ``"<dist>_version"`` of each distribution in ``extra``; a library
+    that is not installed reads "not installed"."""
     out = {"taichi_ice_version": __version__, "python_version": platform.python_version()}
-    for dist in ("taichi", "numpy", "h5py"):
+    for dist in ("taichi", "numpy", "h5py", *extra):
         try:
             out[f"{dist}_version"] = metadata.version(dist)
         except metadata.PackageNotFoundError:

@@ -47,7 +47,7 @@ SHAPES = ("rectangle", "diamond", "polygon")
 DEFAULT_OUTPUT_INTERVAL = 0.1  # s between frames
 DEFAULT_SERIES_INTERVAL = 0.01  # s between time-series samples (capped at output_interval)
 # Most vertices of one outline: the contact kernels hold an outline in a fixed-size local
-# matrix (assemble.MAX_VERTS_LIMIT, checked again there); checked here when a scene is read.
+# matrix (assemble.MAX_VERTS_LIMIT is this); checked here when a scene is read.
 MAX_VERTICES = 16
 # Most steps a run may need (duration / dt): beyond this a scene's smallest block is so small
 # (or light) that the run would never end; it is refused with the block's name.

@@ -22,7 +22,9 @@ import numpy as np
 from .geometry import longest_edge, mass_properties
 
 # dt = "auto" takes this fraction of the stability limit: a contact oscillation then spans
-# at least ~30 steps, so overlaps, contact widths and the friction memory are resolved.
+# at least ~30 steps, so overlaps, contact widths and the friction memory are resolved. A jam
+# at full load survives 1.42 x the limit, so this keeps 7.1 x; accuracy, not stability, sets
+# it (docs/accuracy.md, "Decision").
 DEFAULT_SAFETY = 0.2
 
 

@@ -178,7 +178,7 @@ def check_output(path: str | Path, overwrite: bool = False, inputs=()) -> Path:
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"{p}: cannot make its folder {parent} ({exc.strerror or exc})") from None
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not os.access(parent, os.W_OK | os.X_OK):  # novermin (flags, not a union type)
         raise OutputError(f"{p}: the folder {parent} is not writable; give another --out")
     if p.exists() and not os.access(p, os.W_OK):
         raise OutputError(f"{p}: exists and is not writable; give another --out")
@@ -206,7 +206,8 @@ class RunLock:
         }
         for _ in range(3):
             try:
-                fd = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+                flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY  # novermin (flags, not a union)
+                fd = os.open(self.path, flags, 0o644)
             except FileExistsError:
                 other = self.owner()
                 if self._stale(other):

@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import numpy as np
@@ -85,24 +87,24 @@ def test_a_world_has_the_same_columns_alone_and_in_a_batch(pushed):
 
 
 def test_too_many_vertices_is_a_scene_error_naming_the_body():
-    """A polygon beyond the kernels' vertex limit is refused before any field exists."""
+    """A polygon beyond the kernels' vertex limit is refused when the scene is read, and by
+    assemble when a scene is built by hand, before any field exists."""
     n = MAX_VERTS_LIMIT + 1
-    angles = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    scene = scene_from_dict(
-        {
-            "simulation": {"duration": 1.0},
-            "body": [
-                {
-                    "name": "round",
-                    "shape": "polygon",
-                    "vertices": np.stack([np.cos(angles), np.sin(angles)], 1).tolist(),
-                    "position": [0.0, 0.0],
-                }
-            ],
-        }
-    )
+
+    def ring(count):
+        angles = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+        return np.stack([np.cos(angles), np.sin(angles)], 1)
+
+    def tables(vertices):
+        body = {"name": "round", "shape": "polygon", "position": [0.0, 0.0]}
+        return {"simulation": {"duration": 1.0}, "body": [{**body, "vertices": vertices}]}
+
+    with pytest.raises(ScenarioError, match=f"'round'.*{n} vertices"):
+        scene_from_dict(tables(ring(n).tolist()))
+    scene = scene_from_dict(tables(ring(n - 1).tolist()))
+    body = dataclasses.replace(scene.bodies[0], vertices=ring(n))
     with pytest.raises(ScenarioError, match=f"'round' has {n} vertices"):
-        assemble([scene])
+        assemble([dataclasses.replace(scene, bodies=(body,))])
 
 
 def test_budget_residual_and_breach_on_hand_made_terms():

@@ -282,12 +282,12 @@ def ensemble_command(
     import json
     import sys
 
+    from .io import check_folder
     from .plots import plot_spread
     from .scenario import load_scenario
 
+    out = check_folder(out)  # before any work
     scene = load_scenario(scene_path)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     seeds = [scene.simulation.seed + k for k in range(n_seeds)]
     results: dict[str, EnsembleResult] = {}
     for law in laws:

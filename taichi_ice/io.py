@@ -141,6 +141,30 @@ _READ_PAUSE = 0.05  # s
 # --------------------------------------------------------------------------------------------
 
 
+def check_folder(path: str | Path) -> Path:
+    """Check that ``path`` can be an output folder (``ensemble --out``, ``paper --out``), and
+    make it.
+
+    Raises:
+        OutputError: the path is a file, lies below a file, or cannot be made or written.
+    """
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"{p}: is a file; --out names a folder of results: give a folder")
+    ancestor = p
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if ancestor.exists() and not ancestor.is_dir():
+        raise OutputError(f"{p}: cannot be made: {ancestor} is a file, not a folder")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot make the folder ({exc.strerror or exc})") from None
+    if not os.access(p, os.W_OK | os.X_OK):  # novermin (flags, not a union type)
+        raise OutputError(f"{p}: the folder is not writable; give another --out")
+    return p
+
+
 def check_output(path: str | Path, overwrite: bool = False, inputs=()) -> Path:
     """Check that ``path`` can be written as a run file, and make its folder.
 

@@ -121,12 +121,13 @@ def reproduce(
         extras: also run the ``variants`` over the same layouts and rate-and-state with an
             ice strength of each of ``STRENGTHS`` (the scene's own layout).
     """
+    from .io import check_folder
     from .scenario import load_scenario
     from .studies import single_interface
 
     if seeds < 0:
         raise ValueError(f"--seeds {seeds}: must be 0 or more")
-    out = Path(out)
+    out = check_folder(out)  # before any work
     runs, figures = out / "runs", out / "figures"
     figures.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()

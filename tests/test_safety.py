@@ -102,6 +102,23 @@ def test_bad_output_paths_are_refused_before_any_work(tmp_path, capsys, monkeypa
     assert expect in one_line(capsys.readouterr().err)
 
 
+@pytest.mark.parametrize("command", ["ensemble", "paper"])
+@pytest.mark.parametrize("case", ["a file", "below a file"])
+def test_an_output_folder_that_is_a_file_is_one_line_before_any_work(
+    tmp_path, capsys, monkeypatch, command, case
+):
+    def never(*args, **kwargs):
+        raise AssertionError("the scene was read before the output folder was checked")
+
+    monkeypatch.setattr("taichi_ice.scenario.load_scenario", never)
+    (tmp_path / "f").write_text("kept")
+    out = tmp_path / "f" if case == "a file" else tmp_path / "f" / "results"
+    args = [command, TWO_SQUARES] if command == "ensemble" else [command]
+    assert main([*args, "--out", str(out), "--quiet"]) == 2
+    assert "is a file" in one_line(capsys.readouterr().err)
+    assert (tmp_path / "f").read_text() == "kept"
+
+
 def test_a_second_writer_is_refused_naming_the_first(tmp_path, capsys):
     out = tmp_path / "sq.h5"
     other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])

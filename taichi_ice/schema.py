@@ -36,7 +36,7 @@ import ast
 import dataclasses
 import inspect
 import textwrap
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -546,7 +546,10 @@ def _target_bases(node: ast.AST) -> list[ast.AST]:
 
 
 def traffic(
-    stages: Mapping[str, type], layout: Layout, contacts: float, kernels=None
+    stages: Mapping[str, type],
+    layout: Layout,
+    contacts: float,
+    kernels: Collection[str] | None = None,
 ) -> dict[str, float]:
     """Bytes per step that each kernel must move, from the stages' declarations.
 

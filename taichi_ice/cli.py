@@ -43,6 +43,14 @@ EXAMPLES = {
   taichi-ice bench --out out/bench                  # 1e3, 1e4, 1e5 blocks; f64 and f32; Box2D
   taichi-ice bench --sizes 1e5 1e6 --precision f32 --arch gpu --no-box2d
   taichi-ice bench --sizes 200 --steps 5 --no-box2d --out /tmp/bench   # a smoke run""",
+    "export": """examples:
+  taichi-ice export runs/pillar.h5 --vtk out/pillar_vtk    # then open pillar.pvd in ParaView
+  taichi-ice export runs/pillar.h5 --vtk out/v --every 10 --overwrite
+
+Each frame is a VTK PolyData file (.vtp): every floe a polygon, with cell data velocity,
+angular_velocity, body (index) and kind (0 dynamic, 1 fixed, 2 kinematic); the .pvd file
+collects them with their times. Contact force chains are not written: run files hold no
+per-contact data yet.""",
     "plot": """examples:
   taichi-ice plot runs/pushed.h5                    # figures beside the file
   taichi-ice plot runs/pushed.h5 --out figs/ --animate""",
@@ -207,6 +215,16 @@ def _cmd_plot(args) -> int:
     written = plot_run(args.run, out_dir=args.out, animate=args.animate)
     for path in written:
         print(f"wrote {path}")
+    return 0
+
+
+def _cmd_export(args) -> int:
+    from .export import export_vtk
+
+    pvd = export_vtk(
+        args.run, args.vtk, overwrite=args.overwrite, binary=not args.ascii, every=args.every
+    )
+    print(f"wrote {pvd} (open it in ParaView)")
     return 0
 
 
@@ -381,6 +399,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run", help="HDF5 run file")
     p.add_argument("--out", default=None, help="folder for the figures (default: beside the file)")
     p.add_argument("--animate", action="store_true", help="also write an animation (GIF)")
+
+    p = add(
+        "export",
+        "a run file's frames for ParaView: floes as polygons with their velocity (VTK files)",
+        _cmd_export,
+    )
+    p.add_argument("run", help="HDF5 run file")
+    p.add_argument(
+        "--vtk",
+        required=True,
+        metavar="DIR",
+        help="folder for RUN_000000.vtp ... and RUN.pvd (made if missing)",
+    )
+    p.add_argument(
+        "--every", type=_positive_int, default=1, metavar="N", help="every N-th frame (default 1)"
+    )
+    p.add_argument("--ascii", action="store_true", help="arrays as text, not base64")
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier export in DIR")
     return parser
 
 

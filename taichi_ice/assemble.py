@@ -275,10 +275,24 @@ def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
     out["body_vert_start"] = (
         np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int32) if n else count
     )
-    out["vert_local"] = np.concatenate(verts) if verts else np.zeros((0, 2))
+    # Bodies of one shape (a field's blocks) share their unturned outline: it is stored once.
+    shapes: dict[bytes, int] = {}
+    local_start = np.zeros(n, dtype=np.int32)
+    distinct: list[np.ndarray] = []
+    n_local = 0
+    for i, v in enumerate(verts):
+        key = v.tobytes()
+        if key not in shapes:
+            shapes[key] = n_local
+            distinct.append(v)
+            n_local += len(v)
+        local_start[i] = shapes[key]
+    out["body_local_start"] = local_start
+    out["vert_local"] = np.concatenate(distinct) if distinct else np.zeros((0, 2))
     sizes = {
         "n_bodies": n,
         "n_verts": int(count.sum()),
+        "n_local_verts": n_local,
         "n_worlds": n_worlds,
         "n_probes": n_probe,
         "n_large": len(large_ids),

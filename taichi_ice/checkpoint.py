@@ -13,10 +13,10 @@ declaration (``taichi_ice.schema``) as fields come and go:
 - ``/nbr/<name>``: the neighbour lists (``World.neighbours``), so that they are rebuilt at the
   same steps as in a run that was never stopped;
 - ``/host/initial_energy``: the energy table at t = 0 (the budget's starting capital);
-- attributes: ``steps``, ``time``, ``cur`` (the contact buffer of the last step, when the
-  world has one), ``dt``, ``precision``, ``n_samples`` and ``n_frames`` (rows of each run file
-  written when it was taken, JSON lists), ``scenarios`` and ``frictions`` (JSON lists: a resume
-  must be the same run), ``format_version`` and ``written`` (UTC).
+- attributes: ``steps``, ``time``, ``dt``, ``precision``, ``n_samples`` and ``n_frames``
+  (rows of each run file written when it was taken, JSON lists), ``scenarios`` and
+  ``frictions`` (JSON lists: a resume must be the same run), ``format_version`` and
+  ``written`` (UTC).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import numpy as np
 from . import provenance
 from .errors import RunFileError
 
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"  # 2: contact memory single-buffered (no buffer axis, no contact_area)
 SUFFIX = ".ckpt"
 
 
@@ -72,8 +72,6 @@ def write(sim, path: str | Path, n_samples, n_frames) -> Path:
         f.attrs["written"] = provenance.now()
         f.attrs["steps"] = int(world.steps)
         f.attrs["time"] = float(world.time)
-        if hasattr(world, "cur"):
-            f.attrs["cur"] = int(world.cur)
         f.attrs["dt"] = ident["dt"]
         f.attrs["precision"] = ident["precision"]
         f.attrs["scenarios"] = json.dumps(ident["scenarios"])
@@ -121,6 +119,12 @@ def restore(sim, ckpt: dict, where: str | Path) -> None:
         RunFileError: the checkpoint is of another run, or its fields do not fit.
     """
     a = ckpt["attrs"]
+    if str(a.get("format_version")) != FORMAT_VERSION:
+        raise RunFileError(
+            f"{where}: the checkpoint is of format {a.get('format_version')}, written by another "
+            f"version of taichi-ice (this one reads format {FORMAT_VERSION}); resume it with "
+            "that version, or start anew with --overwrite"
+        )
     ident = identity(sim)
     for key, now, then in (
         ("scene", ident["scenarios"], a["scenarios"]),
@@ -156,8 +160,6 @@ def restore(sim, ckpt: dict, where: str | Path) -> None:
     sim.initial_energy = np.asarray(ckpt["host"]["initial_energy"]).copy()
     world.steps = int(a["steps"])
     world.time = world.steps * world.dt
-    if "cur" in a and hasattr(world, "cur"):
-        world.cur = int(a["cur"])
 
 
 def remove(path: str | Path) -> None:

@@ -19,10 +19,11 @@ For every candidate pair the owner body's thread clips the two outlines
 
 Ownership: each pair is handled once, by a dynamic body if exactly one is dynamic, else by
 the lower id; small-large pairs by the small body. The owner keeps the contact's memory
-(partner, ``xi``, ``theta``, stored elastic energy, crushed area; and the overlap area, for
-output) in one
-of its K slots; a pair that no longer overlaps is not written again, so its memory is
-dropped. More than K contacts raise the overflow status, which the simulation turns into an error.
+(partner, ``xi``, ``theta``, stored elastic energy, crushed area) in one of its K slots;
+a pair that no longer overlaps is not written again, so its memory is dropped. The slots
+are single-buffered: only the owner's thread touches them, and it copies the last step's
+memory out (``remember``) before writing this step's over it. More than K contacts raise
+the overflow status, which the simulation turns into an error.
 
 Forces are gathered in 64-bit fixed point (``state.FORCE_QUANTUM``), so a run is bit-for-bit
 reproducible on any number of threads and in any batch.
@@ -207,7 +208,6 @@ class ContactStage(Stage):
                 "contact_count",
                 "contact_partner",
                 "contact_xi",
-                "contact_area",
                 "contact_elastic",
                 "contact_theta",
                 "contact_crushed",
@@ -221,7 +221,6 @@ class ContactStage(Stage):
                 "body_omega",
                 "contact_partner",
                 "contact_xi",
-                "contact_area",
                 "contact_elastic",
                 "contact_theta",
                 "contact_crushed",
@@ -304,31 +303,28 @@ class ContactStage(Stage):
         ti.atomic_add(d.body_torque_q[i], ti.cast(torque * q, ti.i64))
 
     @ti.func
-    def pair(self, i, j, p, n_p, cur, used, dt):
+    def pair(self, i, j, p, n_p, old, n_old, used, dt):
         """Contact between owner i, whose outline relative to its centroid is ``p``, and
-        partner j; returns the owner's new slot count."""
+        partner j; ``old`` holds the owner's memory of the last step (``remember``, ``n_old``
+        contacts). Returns the owner's new slot count."""
         m, d = ti.static((self.model, self.data))
-        nxt = 1 - cur
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
         q, n_q = self.outline(j, xi_)
         area, point, normal, width, _kind = overlap_ti(p, n_p, q, n_q)
         if area > 0.0:
             # Memory of this pair from the last step, if it was in contact then.
-            found = -1
-            for s in range(d.contact_count[cur, i]):
-                if d.contact_partner[cur, i, s] == j:
-                    found = s
             xi = 0.0
             elastic = 0.0
             crushed = 0.0
             theta = NO_INTERFACE
-            if found >= 0:
-                xi = d.contact_xi[cur, i, found]
-                elastic = d.contact_elastic[cur, i, found]
-                if ti.static(self.layout.crushing):
-                    crushed = d.contact_crushed[cur, i, found]
-                if ti.static(self.layout.rate_state):
-                    theta = d.contact_theta[cur, i, found]
+            for s in range(n_old):
+                if old.partner[s] == j:
+                    xi = old.xi[s]
+                    elastic = old.elastic[s]
+                    if ti.static(self.layout.crushing):
+                        crushed = old.crushed[s]
+                    if ti.static(self.layout.rate_state):
+                        theta = old.theta[s]
             # point is relative to body i
             r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)
             v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
@@ -401,14 +397,13 @@ class ContactStage(Stage):
                 d.body_energy[i, BodyEnergy.CRUSHING] += crush_work
 
             if used < self.layout.slots:
-                d.contact_partner[nxt, i, used] = j
-                d.contact_xi[nxt, i, used] = xi_new
-                d.contact_area[nxt, i, used] = area
-                d.contact_elastic[nxt, i, used] = elastic
+                d.contact_partner[i, used] = j
+                d.contact_xi[i, used] = xi_new
+                d.contact_elastic[i, used] = elastic
                 if ti.static(self.layout.rate_state):
-                    d.contact_theta[nxt, i, used] = theta_new
+                    d.contact_theta[i, used] = theta_new
                 if ti.static(self.layout.crushing):
-                    d.contact_crushed[nxt, i, used] = crushed_new
+                    d.contact_crushed[i, used] = crushed_new
             used += 1
         return used
 
@@ -466,18 +461,42 @@ class ContactStage(Stage):
         return keep
 
     @ti.func
-    def body(self, i, cand, n, cur, dt):
+    def remember(self, i):
+        """Body i's contact memory of the last step, copied out of its slots (which this
+        step overwrites: only the owner's thread touches them, so one buffer suffices), and
+        its count."""
+        d, k = ti.static((self.data, self.layout.slots))
+        old = ti.Struct(
+            partner=ti.Vector.zero(ti.i32, k),
+            xi=ti.Vector.zero(self.layout.real, k),
+            elastic=ti.Vector.zero(self.layout.real, k),
+            theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
+            crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
+        )
+        n_old = d.contact_count[i]
+        for s in range(n_old):
+            old.partner[s] = d.contact_partner[i, s]
+            old.xi[s] = d.contact_xi[i, s]
+            old.elastic[s] = d.contact_elastic[i, s]
+            if ti.static(self.layout.rate_state):
+                old.theta[s] = d.contact_theta[i, s]
+            if ti.static(self.layout.crushing):
+                old.crushed[s] = d.contact_crushed[i, s]
+        return old, n_old
+
+    @ti.func
+    def body(self, i, cand, n, dt):
         """Every contact of owner i with its candidate partners ``cand[:n]`` (ascending ids,
-        so the sums of a body do not depend on how the candidates were found); memory read
-        from buffer cur, written to 1 - cur."""
+        so the sums of a body do not depend on how the candidates were found); the memory of
+        the last step is read from its slots and this step's written over it."""
         _m, d = ti.static((self.model, self.data))
-        nxt = 1 - cur
+        old, n_old = self.remember(i)
         used = 0
         # The owner's outline once for all its candidates.
         p, n_p = self.outline(i, d.body_pos[i])
         for k in range(ti.min(n, self.n_cand)):
-            used = self.pair(i, cand[k], p, n_p, cur, used, dt)
-        d.contact_count[nxt, i] = ti.min(used, self.layout.slots)
+            used = self.pair(i, cand[k], p, n_p, old, n_old, used, dt)
+        d.contact_count[i] = ti.min(used, self.layout.slots)
         # More contacts than slots, or more near neighbours than the candidate list holds,
         # is reported (never silently dropped): the caller turns it into CapacityError.
         need = used
@@ -572,7 +591,7 @@ class ContactStage(Stage):
                 nb.nbr_rebuild[None] = 0
 
     @ti.func
-    def listed(self, i, cur, dt):
+    def listed(self, i, dt):
         """Body i's contacts, its candidates taken from its neighbour list."""
         nb, _d = ti.static((self.neighbours, self.data))
         cand = ti.Vector.zero(ti.i32, self.n_cand)
@@ -583,11 +602,11 @@ class ContactStage(Stage):
                 if n < self.n_cand:
                     cand[n] = j
                 n += 1
-        self.body(i, cand, n, cur, dt)
+        self.body(i, cand, n, dt)
 
     @ti.kernel
-    def compute(self, cur: ti.i32):
+    def compute(self):
         """Forces of every contact of the step in parallel over bodies, candidates from the
-        neighbour lists; memory read from buffer cur, written to 1 - cur."""
+        neighbour lists, and the contacts' memory."""
         for i in range(self.layout.n_bodies):
-            self.listed(i, cur, self.data.time_step[None])
+            self.listed(i, self.data.time_step[None])

@@ -47,8 +47,8 @@ class EnergyMeter(Stage):
         self.layout, self.model, self.data = layout, model, data
 
     @ti.kernel
-    def snapshot(self, cur: ti.i32):
-        """Energy terms of every world from the state after a step (contact buffer cur)."""
+    def snapshot(self):
+        """Energy terms of every world from the state after a step."""
         m, d = ti.static((self.model, self.data))
         for w in range(self.layout.n_worlds):
             kinetic = ti.cast(0.0, ti.f64)
@@ -65,8 +65,8 @@ class EnergyMeter(Stage):
                         + m.body_inertia[i] * d.body_omega[i] ** 2,
                         ti.f64,
                     )
-                for s in range(d.contact_count[cur, i]):
-                    elastic += ti.cast(d.contact_elastic[cur, i, s], ti.f64)
+                for s in range(d.contact_count[i]):
+                    elastic += ti.cast(d.contact_elastic[i, s], ti.f64)
                 friction += d.body_energy[i, BodyEnergy.FRICTION]
                 viscous += d.body_energy[i, BodyEnergy.VISCOUS]
                 drag += d.body_energy[i, BodyEnergy.DRAG]

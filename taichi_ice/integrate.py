@@ -41,6 +41,7 @@ class Integrator(Stage):
                 "body_inv_mass",
                 "body_inv_inertia",
                 "body_vert_start",
+                "body_local_start",
                 "body_vert_count",
                 "vert_local",
                 # Data in
@@ -76,7 +77,13 @@ class Integrator(Stage):
             ),
         ),
         "orient": Access(
-            reads=("body_angle", "body_vert_start", "body_vert_count", "vert_local"),
+            reads=(
+                "body_angle",
+                "body_vert_start",
+                "body_local_start",
+                "body_vert_count",
+                "vert_local",
+            ),
             writes=("vert_turned",),
         ),
     }
@@ -100,9 +107,9 @@ class Integrator(Stage):
         """Body i's outline turned to its angle, relative to its centroid."""
         m, d = ti.static((self.model, self.data))
         c, s = ti.cos(d.body_angle[i]), ti.sin(d.body_angle[i])
-        start = m.body_vert_start[i]
+        start, local = m.body_vert_start[i], m.body_local_start[i]
         for k in range(m.body_vert_count[i]):
-            v = m.vert_local[start + k]
+            v = m.vert_local[local + k]
             d.vert_turned[start + k] = ti.Vector([c * v[0] - s * v[1], s * v[0] + c * v[1]])
 
     @ti.kernel

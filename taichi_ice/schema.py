@@ -13,12 +13,12 @@ symbol     meaning
 ========== ===============================================================================
 n_bodies   N, every body of every world, world-major
 n_verts    V, vertices of every body's outline
+n_local_verts  vertices of the distinct unturned outlines (bodies of one shape share one)
 n_worlds   W, worlds of the batch; ``world_edges`` = W + 1
 n_probes   P, probe bodies (their contact force is recorded)
 n_small    S, bodies in the spatial hash (the rest are large: walls, pushers)
 n_large    G, large bodies, checked against every body of their world
 slots      K, contact slots per body
-buffers    2: contact memory alternates between two buffers, step by step
 hash_size  H, buckets of the spatial hash (a power of two)
 scan_blocks H / SCAN, blocks of the hash's two-level prefix sum
 nbr_len    C, entries of a body's neighbour list (candidate partners it owns)
@@ -176,13 +176,14 @@ MODEL: tuple[Var, ...] = (
     Var("body_mass", "real", ("n_bodies",), "kg", "mass, for the kinetic energy", role="diagnostic", init=HOST),
     Var("body_inertia", "real", ("n_bodies",), "kg m^2", "moment of inertia about the centroid", role="diagnostic", init=HOST),
     Var("body_radius", "real", ("n_bodies",), "m", "circumradius about the centroid", init=HOST),
-    Var("body_vert_start", "i32", ("n_bodies",), "id", "first vertex of the body in vert_local", init=HOST),
+    Var("body_vert_start", "i32", ("n_bodies",), "id", "first vertex of the body in vert_turned", init=HOST),
+    Var("body_local_start", "i32", ("n_bodies",), "id", "first vertex of the body's unturned outline in vert_local (shared by bodies of one shape)", init=HOST),
     Var("body_vert_count", "i32", ("n_bodies",), "", "vertices of the body (<= max_verts)", init=HOST),
     Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, init=HOST),
     Var("body_drag_linear", "real", ("n_bodies",), "kg/m", "quadratic water drag on translation", when="water", init=HOST),
     Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation", when="water", init=HOST),
     Var("body_probe", "i32", ("n_bodies",), "id", "probe index of the body, -1 if none", init=HOST),
-    Var("vert_local", "real", ("n_verts",), "m", "outline relative to the centroid, unrotated", lanes=2, init=HOST),
+    Var("vert_local", "real", ("n_local_verts",), "m", "distinct outlines relative to the centroid, unrotated", lanes=2, init=HOST),
     Var("world_body_start", "i32", ("world_edges",), "id", "first body of each world (bodies are world-major)", role="cold", init=HOST),
     Var("large_ids", "i32", ("n_large",), "id", "large bodies, world by world", role="cold", init=HOST),
     Var("world_large_start", "i32", ("world_edges",), "id", "first large body of each world in large_ids", role="cold", init=HOST),
@@ -198,13 +199,12 @@ DATA: tuple[Var, ...] = (
     Var("body_force_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "contact force gathered this step, fixed point", lanes=2),
     Var("body_torque_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "contact torque gathered this step, fixed point"),
     Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic"),
-    Var("contact_partner", "i32", ("buffers", "n_bodies", "slots"), "id", "partner body of each slot, -1 if empty", init=-1),
-    Var("contact_count", "i32", ("buffers", "n_bodies"), "", "used slots of each body"),
-    Var("contact_xi", "real", ("buffers", "n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
-    Var("contact_area", "real", ("buffers", "n_bodies", "slots"), "m^2", "overlap area of the contact this step", role="diagnostic"),
-    Var("contact_elastic", "real", ("buffers", "n_bodies", "slots"), "J", "elastic energy stored in the contact: work of its normal and tangential springs", role="diagnostic"),
-    Var("contact_theta", "real", ("buffers", "n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
-    Var("contact_crushed", "real", ("buffers", "n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
+    Var("contact_partner", "i32", ("n_bodies", "slots"), "id", "partner body of each slot, -1 if empty", init=-1),
+    Var("contact_count", "i32", ("n_bodies",), "", "used slots of each body"),
+    Var("contact_xi", "real", ("n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
+    Var("contact_elastic", "real", ("n_bodies", "slots"), "J", "elastic energy stored in the contact: work of its normal and tangential springs", role="diagnostic"),
+    Var("contact_theta", "real", ("n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
+    Var("contact_crushed", "real", ("n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
     Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic"),
     Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
     Var("status", "i32", ("status_len",), "code", "overflow and divergence flags, codes.Status entries", role="cold"),
@@ -270,7 +270,7 @@ class Layout:
     share compiled kernels.
 
     Attributes:
-        n_bodies, n_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size: sizes
+        n_bodies, n_verts, n_local_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size: sizes
             (see the module table).
         max_verts: most vertices of any body (the kernels' local outline matrices).
         cell_size: edge of a hash cell (m), the diameter of the largest small body.
@@ -296,6 +296,7 @@ class Layout:
 
     n_bodies: int
     n_verts: int
+    n_local_verts: int
     n_worlds: int
     n_probes: int
     n_small: int
@@ -331,7 +332,6 @@ class Layout:
             return symbol
         derived = {
             "world_edges": self.n_worlds + 1,
-            "buffers": 2,
             "scan_blocks": (self.hash_size + SCAN - 1) // SCAN,
             "energy_terms": len(EnergyTerm),
             "body_energy_terms": len(BodyEnergy),
@@ -583,9 +583,7 @@ def traffic(
                 if name in access.per_contact:
                     # Only the slots of this step's contacts are touched, and only the
                     # bodies in a contact; other axes (energy columns) stay whole.
-                    rest = [
-                        layout.size(s) for s in v.shape if s not in ("buffers", "n_bodies", "slots")
-                    ]
+                    rest = [layout.size(s) for s in v.shape if s not in ("n_bodies", "slots")]
                     per = contacts if "slots" in v.shape else min(layout.n_bodies, 2.0 * contacts)
                     elements = per * float(np.prod(rest, dtype=np.float64))
                 else:

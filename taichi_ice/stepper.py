@@ -2,7 +2,7 @@
 
 A scene of tens of blocks does less work per step than a kernel launch costs: stepping it
 with ``World.step`` (three launches and a dozen offloaded tasks per step) spends most of its
-time starting threads. ``WorldStepper.run(n, cur)`` instead launches once for ``n`` steps;
+time starting threads. ``WorldStepper.run(n)`` instead launches once for ``n`` steps;
 its one parallel loop runs over the worlds of the batch, and the thread of a world takes it
 through the ``n`` steps in turn:
 
@@ -48,6 +48,7 @@ class WorldStepper(Stage):
                 "body_inv_inertia",
                 "body_inv_mass",
                 "body_kind",
+                "body_local_start",
                 "body_omega",
                 "body_pos",
                 "body_probe",
@@ -92,7 +93,6 @@ class WorldStepper(Stage):
                 "body_pos",
                 "body_torque_q",
                 "body_vel",
-                "contact_area",
                 "contact_count",
                 "contact_crushed",
                 "contact_elastic",
@@ -127,19 +127,18 @@ class WorldStepper(Stage):
         self.neighbours, self.contacts, self.integrator = neighbours, contacts, integrator
 
     @ti.kernel
-    def run(self, n: ti.i32, cur: ti.i32):
-        """``n`` steps of every world; contact memory starts in buffer ``cur`` and alternates."""
+    def run(self, n: ti.i32):
+        """``n`` steps of every world."""
         m, d, nb = ti.static((self.model, self.data, self.neighbours))
         for w in range(self.layout.n_worlds):
             dt = d.time_step[None]
             lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
-            for s in range(n):
-                buf = (cur + s) % 2
+            for _s in range(n):
                 if nb.world_nbr_stale[w]:
                     for i in range(lo, hi):
                         self.contacts.build_list(i)
                     nb.world_nbr_stale[w] = 0
                 for i in range(lo, hi):
-                    self.contacts.listed(i, buf, dt)
+                    self.contacts.listed(i, dt)
                 for i in range(lo, hi):
                     self.integrator.body(i, dt)  # marks the lists stale

@@ -106,7 +106,6 @@ class World:
         self.stepper = WorldStepper(
             self.layout, self.model, self.data, self.neighbours, self.contacts, self.integrator
         )
-        self.cur = 0  # contact buffer holding the memory of the last step
         self.steps = 0
         self.time = 0.0
 
@@ -123,14 +122,12 @@ class World:
         if n <= 0:
             return
         if self.stepping == "worlds":
-            self.stepper.run(n, self.cur)
-            self.cur = (self.cur + n) % 2
+            self.stepper.run(n)
         else:
             for _ in range(n):
                 self.refresh_lists()
-                self.contacts.compute(self.cur)
+                self.contacts.compute()
                 self.integrator.advance()
-                self.cur = 1 - self.cur
         self.steps += n
         self.time = self.steps * self.dt
 
@@ -192,7 +189,7 @@ class World:
 
     def energies(self) -> np.ndarray:
         """``(W, E)`` energy table of every world now (J), ``codes.EnergyTerm`` columns."""
-        self.energy.snapshot(self.cur)
+        self.energy.snapshot()
         return self.data.world_energy.to_numpy()[: len(self.scenes)]
 
     def positions(self) -> np.ndarray:
@@ -219,7 +216,7 @@ class World:
 
     def contact_counts(self) -> np.ndarray:
         """``(W,)`` number of contacts in each world after the last step."""
-        counts = self.data.contact_count.to_numpy()[self.cur, : self.layout.n_bodies]
+        counts = self.data.contact_count.to_numpy()[: self.layout.n_bodies]
         return np.bincount(self.host.body_world, weights=counts, minlength=len(self.scenes)).astype(
             np.int64
         )

@@ -129,24 +129,18 @@ def pair_scenes(rng: np.random.Generator, law) -> tuple[list, np.ndarray, np.nda
     return scenes, np.array(pos), np.array(ang)
 
 
-def kernel_contacts(world: World, buffer: int) -> dict:
-    """``{(owner, partner): (xi, area, elastic, theta)}`` from one contact buffer."""
+def kernel_contacts(world: World) -> dict:
+    """``{(owner, partner): (xi, elastic, theta)}`` from the contact slots."""
     d = world.data
-    count = d.contact_count.to_numpy()[buffer]
-    partner = d.contact_partner.to_numpy()[buffer]
-    xi, area = d.contact_xi.to_numpy()[buffer], d.contact_area.to_numpy()[buffer]
-    elastic = d.contact_elastic.to_numpy()[buffer]
-    theta = d.contact_theta.to_numpy()[buffer] if world.layout.rate_state else None
+    count = d.contact_count.to_numpy()
+    partner = d.contact_partner.to_numpy()
+    xi, elastic = d.contact_xi.to_numpy(), d.contact_elastic.to_numpy()
+    theta = d.contact_theta.to_numpy() if world.layout.rate_state else None
     out = {}
     for i in range(world.layout.n_bodies):
         for s in range(count[i]):
             th = float(theta[i, s]) if theta is not None else 0.0
-            out[(i, int(partner[i, s]))] = (
-                float(xi[i, s]),
-                float(area[i, s]),
-                float(elastic[i, s]),
-                th,
-            )
+            out[(i, int(partner[i, s]))] = (float(xi[i, s]), float(elastic[i, s]), th)
     return out
 
 
@@ -170,11 +164,11 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
         d.body_torque_q.fill(0)
         d.body_energy.fill(0.0)
         world.refresh_lists()
-        world.contacts.compute(step)
+        world.contacts.compute()
         force_q = d.body_force_q.to_numpy()
         torque_q = d.body_torque_q.to_numpy()
         energy = d.body_energy.to_numpy()
-        contacts = kernel_contacts(world, 1 - step)
+        contacts = kernel_contacts(world)
         expected = {}
         for w in range(N_PAIRS):
             a, b = 2 * w, 2 * w + 1
@@ -220,10 +214,9 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                 c.viscous_work, rel=1e-8, abs=1e-12
             )
         assert set(contacts) == set(expected)
-        for key, (xi, area, elastic, theta) in contacts.items():
+        for key, (xi, elastic, theta) in contacts.items():
             want = expected[key]
             assert xi == pytest.approx(want.xi, rel=1e-8, abs=1e-15)
-            assert area == pytest.approx(want.area, rel=TWIN_RTOL)
             assert elastic == pytest.approx(want.elastic, rel=1e-8, abs=1e-12)
             assert theta == pytest.approx(want.theta, rel=TWIN_RTOL, abs=1e-15)
         memory = expected
@@ -326,11 +319,11 @@ def test_spatial_hash_finds_exactly_the_overlapping_pairs(f64):
         pos[sl.start + 1] = [5.0 - 3.0 * w, side / 2]  # wall_b across the square
     world.place(pos, ang)
     world.refresh_lists()
-    world.contacts.compute(world.cur)
+    world.contacts.compute()
     assert world.data.status.to_numpy()[Status.SLOT_OVERFLOW] <= world.layout.slots
     state = ReferenceState(pos=pos, angle=ang, vel=world.velocities(), omega=world.omegas())
     outlines = [outline(model, state, i) for i in range(n)]
-    found = {frozenset(k) for k in kernel_contacts(world, 1 - world.cur)}
+    found = {frozenset(k) for k in kernel_contacts(world)}
     for a, b in found:
         assert model.world[a] == model.world[b]
     total = 0
@@ -404,13 +397,15 @@ def test_theta_persists_through_a_contact_and_restarts_for_a_new_one(run_opts, t
             vel=world.velocities(),
             omega=world.omegas(),
         )
-        before = kernel_contacts(world, world.cur).get((1, 0))
-        memory = None if before is None else ContactMemory(*before)
+        before = kernel_contacts(world).get((1, 0))
+        memory = None
+        if before is not None:
+            memory = ContactMemory(xi=before[0], elastic=before[1], theta=before[2])
         world.step()
-        after = kernel_contacts(world, world.cur).get((1, 0))
+        after = kernel_contacts(world).get((1, 0))
         if after is None:
             continue
-        theta = after[3]
+        theta = after[2]
         # The sliding rate of this step, from the NumPy twin with the kernel's memory.
         c = contact_force(
             outline(model, state, 1, state.pos[1]),

@@ -227,9 +227,9 @@ def test_world_matches_numpy_reference_step(f64, law, water):
     scale = np.max(np.abs(energy_np), axis=1, keepdims=True)
     assert np.all(np.abs(energy_k - energy_np) <= REFERENCE_RTOL * scale)
     # Contact memory: the same pairs carry the same stretch.
-    counts = world.data.contact_count.to_numpy()[world.cur]
-    partners = world.data.contact_partner.to_numpy()[world.cur]
-    xis = world.data.contact_xi.to_numpy()[world.cur]
+    counts = world.data.contact_count.to_numpy()
+    partners = world.data.contact_partner.to_numpy()
+    xis = world.data.contact_xi.to_numpy()
     kernel_xi = {
         (i, int(partners[i, s])): float(xis[i, s])
         for i in range(model.n_bodies)

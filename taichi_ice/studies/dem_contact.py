@@ -190,7 +190,7 @@ def drive_floor(
         # The probe's impulse accumulates (never reset): its increments are each step's.
         total = impulse[0]
         cum[k + 1, 0], cum[k + 1, 1] = total[0], total[1]
-        xi[k + 1] = stretch[world.cur, BLOCK, 0]
+        xi[k + 1] = stretch[BLOCK, 0]
     wall = time.perf_counter() - start
     world.check()
     step_impulse = np.diff(cum, axis=0)

@@ -110,8 +110,8 @@ def hold_slide(
             rec["v"].append(world.velocities()[blocks, 0])
             rec["omega"].append(world.omegas()[blocks])
             rec["force"].append(world.take_probe_impulses() / (SAMPLE_EVERY * dt))
-            rec["theta"].append(world.data.contact_theta.to_numpy()[world.cur, blocks, 0])
-            rec["xi"].append(world.data.contact_xi.to_numpy()[world.cur, blocks, 0])
+            rec["theta"].append(world.data.contact_theta.to_numpy()[blocks, 0])
+            rec["xi"].append(world.data.contact_xi.to_numpy()[blocks, 0])
     wall = time.perf_counter() - start
     world.check()
     r = {k: np.asarray(v) for k, v in rec.items()}

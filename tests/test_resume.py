@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 
+import h5py
 import numpy as np
 import pytest
 
@@ -118,7 +119,7 @@ def test_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, monkeypa
     np.testing.assert_array_equal(result.series[0]["time"], a["series"]["time"])
 
 
-def test_resume_refuses_another_scene_and_a_missing_checkpoint(tmp_path):
+def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp_path):
     scene = jam()
     path = tmp_path / "r.h5"
     Simulation(scene).run(until=0.05, out=path, checkpoint_every=0)
@@ -126,6 +127,11 @@ def test_resume_refuses_another_scene_and_a_missing_checkpoint(tmp_path):
     other["simulation"]["seed"] = 1
     with pytest.raises(RunFileError, match="another run"):
         Simulation(scene_from_dict(other)).run(until=UNTIL, out=path, resume=True)
+    # A checkpoint of another state layout (format 1 had two contact buffers) is refused.
+    with h5py.File(ckpt.path_for(path), "r+") as f:
+        f.attrs["format_version"] = "1"
+    with pytest.raises(RunFileError, match="format 1"):
+        Simulation(scene).run(until=UNTIL, out=path, resume=True)
     ckpt.remove(ckpt.path_for(path))
     with pytest.raises(RunFileError, match="no checkpoint"):
         Simulation(scene).run(until=UNTIL, out=path, resume=True)

@@ -239,17 +239,19 @@ def run_worlds(
     slots: int | None = None,
     window: float = 1.0,
     progress: bool = False,
+    worlds=None,
 ) -> EnsembleResult:
     """Run ``scenes`` (any layouts, laws and settings one batch can share, see
     ``assemble.assemble``) as the worlds of one Simulation and compute each one's metrics.
 
     ``run_ensemble`` is this over the seeds of one scene; a sweep runs its batches with it.
-    Arguments and result as ``run_ensemble``'s (``out``: one path per scene, or None).
+    Arguments and result as ``run_ensemble``'s (``out``: one path per scene, or None);
+    ``worlds`` as ``Simulation``'s (what makes the World: a sweep reuses compiled ones).
     """
     from .simulation import Simulation
 
     scenes = list(scenes)
-    sim = Simulation(scenes, arch=arch, precision=precision, dt=dt, slots=slots)
+    sim = Simulation(scenes, arch=arch, precision=precision, dt=dt, slots=slots, worlds=worlds)
     try:
         result = sim.run(until=until, out=out, progress=progress)
     except TaichiIceError as exc:

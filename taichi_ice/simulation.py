@@ -76,6 +76,9 @@ class Simulation:
         slots: contact slots per body (default sized from the scene).
         stepping: how the worlds are stepped (``World``): "auto", "worlds" (a thread per
             world, many steps per kernel launch) or "bodies" (parallel over bodies).
+        worlds: what makes the World, called with World's arguments; default ``World``
+            (a new World, its kernels compiled anew). A sweep passes one that reloads a
+            World already compiled for the same layout (``sweep.WorldPool``).
     """
 
     def __init__(
@@ -88,6 +91,7 @@ class Simulation:
         force_dt: bool = False,
         slots: int | None = None,
         stepping: str = "auto",
+        worlds=None,
     ):
         from .limits import check_size
         from .scene import Scene
@@ -155,7 +159,7 @@ class Simulation:
                 f"dt {requested:.4g} s shortened to {self.dt:.4g} s: a whole number of steps "
                 f"per sample ({first.series_interval:g} s) and frame ({first.output_interval:g} s)"
             )
-        self.world = World(
+        self.world = (worlds or World)(
             scenes,
             dt=self.dt,
             precision=precision,

@@ -56,6 +56,7 @@ lies ahead) and moving every kinematic body (the pusher) with the first row.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import hashlib
@@ -64,6 +65,7 @@ import json
 import math
 import os
 import sys
+import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -73,6 +75,7 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
+from .codes import ThetaMethod
 from .ensemble import METRICS
 from .errors import ScenarioError, TaichiIceError
 from .table import Table, check_keys, is_number, type_name
@@ -82,6 +85,7 @@ __all__ = [
     "SweepError",
     "SweepResult",
     "World",
+    "WorldPool",
     "load_sweep",
     "parse_sweep",
     "run_batch",
@@ -99,6 +103,12 @@ _DERIVED = {"body": ("speed",), "field": ("speed", "area_fraction")}
 # Worlds per batch at most: on a CPU a batch is stepped a thread per world, and more worlds
 # than threads only lengthen the batch; on a GPU a batch should fill the device.
 MAX_BATCH = {"cpu": 64, "gpu": 4096}
+# A worker compiles the kernels once per layout (WorldPool); a batch shorter than the others
+# of its kind is padded to their size when running the copies costs less than a compile.
+# Measured on the 2-core VM (pillar scene, 3 worlds): a World built in 4 s and its kernels
+# compiled in 15.5 s; a thread steps small worlds at 1.2-1.4 M body-steps/s (world.py).
+COMPILE_SECONDS = 20.0
+BODY_STEPS_PER_SECOND = 1.2e6
 
 BATCH_DIR = "batches"
 DATASET = "sweep.nc"
@@ -577,18 +587,34 @@ def _check_scenes(sweep: Sweep) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def _share_key(sweep: Sweep, world: World, scenes: dict) -> str:
-    """Worlds with equal keys can share one World: same law kind and integrator, ice, water,
-    simulation settings (time step, intervals) and whether their runs are written."""
-    scene = scenes.get(world.overrides)
+def _override_scene(sweep: Sweep, overrides, scenes: dict):
+    """The sweep's scene with ``overrides`` applied (memoised in ``scenes``)."""
+    scene = scenes.get(overrides)
     if scene is None:
-        scene = apply_overrides(sweep.scene, world.overrides) if world.overrides else sweep.scene
-        scenes[world.overrides] = scene
+        scene = apply_overrides(sweep.scene, overrides) if overrides else sweep.scene
+        scenes[overrides] = scene
+    return scene
+
+
+def _share_key(sweep: Sweep, world: World, scenes: dict, law_kind: bool = False) -> str:
+    """Worlds with equal keys can share one World: same law kind and integrator, ice, water,
+    simulation settings (time step, intervals) and whether their runs are written.
+
+    With ``law_kind``, the key of the compiled kernels instead: the law's name becomes
+    "coulomb" or "rate-state" (every other law runs on the rate-and-state kernels), so
+    batches of rate-state, steady-state and memory-only worlds of one size share a layout.
+    """
+    scene = _override_scene(sweep, world.overrides, scenes)
     settings = dataclasses.replace(scene.simulation, seed=0)
+    law, method = world.law["law"], world.law.get("method")
+    if law_kind:
+        # A law without a theta integrator runs on the default one (assemble).
+        law = "coulomb" if law == "coulomb" else "rate-state"
+        method = method or (None if law == "coulomb" else ThetaMethod.EXPONENTIAL.label)
     return repr(
         (
-            world.law["law"],
-            world.law.get("method"),
+            law,
+            method,
             scene.dt,
             settings,
             scene.ice,
@@ -598,25 +624,84 @@ def _share_key(sweep: Sweep, world: World, scenes: dict) -> str:
     )
 
 
+@dataclass(frozen=True)
+class Batch:
+    """A batch of a sweep's plan: its worlds, and ``pad`` copies of its last world run
+    with them (not recorded) so that it has the size of the other batches of its layout."""
+
+    worlds: tuple[World, ...]
+    pad: int = 0
+
+
 def plan_batches(
     sweep: Sweep, worlds: Sequence[World], workers: int, arch: str = "cpu"
-) -> list[list[World]]:
+) -> list[Batch]:
     """Cut ``worlds`` into batches of worlds that can share one World.
 
     The batch size is the sweep's, or else each group's worlds split evenly over the
-    workers (so every worker gets work, and each batch pays the kernels' compilation once),
-    at most ``MAX_BATCH`` worlds.
+    workers (so every worker gets work), at most ``MAX_BATCH`` worlds, the group cut into
+    batches whose sizes differ by one at most.
+
+    A worker compiles the kernels once per layout (``WorldPool``), and a batch's layout
+    depends on its size: where a kind of batch (the law's kernels, the same scene settings)
+    has more batches than there are workers, a batch shorter than the largest of its kind
+    is padded with copies of its last world when running them costs less than compiling
+    (``COMPILE_SECONDS``, ``BODY_STEPS_PER_SECOND``). Each world is bit-identical in any
+    batch, so padding changes the cost, never a result.
     """
     groups: dict[str, list[World]] = {}
     scenes: dict = {}
     for w in worlds:
         groups.setdefault(_share_key(sweep, w, scenes), []).append(w)
     cap = MAX_BATCH["cpu" if arch == "cpu" else "gpu"]
-    batches = []
+    chunks: list[list[World]] = []
     for group in groups.values():
-        size = sweep.batch_size or min(cap, max(1, math.ceil(len(group) / max(workers, 1))))
-        batches += [group[i : i + size] for i in range(0, len(group), size)]
+        if sweep.batch_size:
+            size = sweep.batch_size
+        else:
+            size = min(cap, max(1, math.ceil(len(group) / max(workers, 1))))
+            # As even as the number of batches allows: 7 worlds in 4 + 3, not 6 + 1.
+            size = math.ceil(len(group) / math.ceil(len(group) / size))
+        chunks += [group[i : i + size] for i in range(0, len(group), size)]
+
+    kinds = [_share_key(sweep, c[0], scenes, law_kind=True) for c in chunks]
+    largest: dict[str, int] = {}
+    for kind, chunk in zip(kinds, chunks):
+        largest[kind] = max(largest.get(kind, 0), len(chunk))
+    batches = []
+    for kind, chunk in zip(kinds, chunks):
+        pad = largest[kind] - len(chunk)
+        # Only where a worker runs more than one batch of the kind; never a batch whose
+        # runs are written (its files are its worlds').
+        shared = kinds.count(kind) > max(workers, 1)
+        written = chunk[-1].index in sweep.runs
+        if not shared or written or _pad_seconds(sweep, chunk, pad) > COMPILE_SECONDS:
+            pad = 0
+        batches.append(Batch(tuple(chunk), pad))
     return batches
+
+
+def _pad_seconds(sweep: Sweep, chunk: Sequence[World], pad: int) -> float:
+    """Estimated seconds (one thread) to run ``pad`` more copies of a world of ``chunk``."""
+    scene = _override_scene(sweep, chunk[-1].overrides, {})
+    steps = math.ceil(sweep.until / scene.dt)
+    return pad * len(scene.bodies) * steps / BODY_STEPS_PER_SECOND
+
+
+def contact_slots(sweep: Sweep) -> int:
+    """Contact slots per body that every batch of ``sweep`` gets: the most that any world
+    needs (``assemble``'s default). Batches of equal slots and size share a layout, so a
+    worker compiles once for all of them."""
+    from .assemble import assemble
+
+    keys = list(sweep.overrides)
+    slots = 1
+    for combo in itertools.product(*(sweep.overrides[k] for k in keys)):
+        pairs = tuple(zip(keys, combo))
+        scene = apply_overrides(sweep.scene, pairs) if pairs else sweep.scene
+        # Seeds move blocks, never change their shapes: the slots are the scene's.
+        slots = max(slots, assemble([scene], force_dt=True).layout.slots)
+    return slots
 
 
 def batch_id(worlds: Sequence[World]) -> str:
@@ -625,8 +710,18 @@ def batch_id(worlds: Sequence[World]) -> str:
     return h[:12]
 
 
-def batch_spec(sweep: Sweep, worlds: Sequence[World], run_dir: Path | None, arch, precision):
+def batch_spec(
+    sweep: Sweep,
+    batch: Batch | Sequence[World],
+    run_dir: Path | None,
+    arch,
+    precision,
+    slots: int | None = None,
+):
     """What a worker needs to run a batch: plain data (it travels to other machines)."""
+    if not isinstance(batch, Batch):
+        batch = Batch(tuple(batch))
+    worlds = batch.worlds
     return {
         "id": batch_id(worlds),
         "scene_text": sweep.scene.text,
@@ -635,6 +730,8 @@ def batch_spec(sweep: Sweep, worlds: Sequence[World], run_dir: Path | None, arch
         "window": sweep.window,
         "arch": arch,
         "precision": precision,
+        "slots": slots,
+        "pad": batch.pad,
         "worlds": [
             {
                 "index": w.index,
@@ -649,12 +746,108 @@ def batch_spec(sweep: Sweep, worlds: Sequence[World], run_dir: Path | None, arch
     }
 
 
+class WorldPool:
+    """The Worlds a process keeps between batches, their kernels compiled.
+
+    A World's kernels specialise on its layout and close over its fields, so each new
+    World compiles them all again (about 20 s for the pillar scene on 2 cores). The pool
+    hands out an idle World of the same layout reloaded with the new scenes
+    (``World.reload``: bit for bit what a new World gives) and builds one only when it has
+    none. A World serves one batch at a time: ``lease()`` gives what makes the Worlds of a
+    batch (``Simulation(worlds=...)``) and, on leaving, gives them back.
+
+    Attributes:
+        built, reloaded: Worlds built, and Worlds handed out again, so far.
+    """
+
+    def __init__(self):
+        self._idle: list[tuple[Any, str]] = []  # (World, stepping asked for)
+        self._lock = threading.Lock()
+        self.built = 0
+        self.reloaded = 0
+
+    def get(
+        self,
+        scenes: Sequence,
+        dt: float | None = None,
+        precision: str = "f64",
+        slots: int | None = None,
+        force_dt: bool = False,
+        stepping: str = "auto",
+    ):
+        """A World of ``scenes`` (``World``'s arguments): an idle one reloaded, or a new one.
+        With ``slots`` None any idle World's slots are taken."""
+        from .errors import UsageError
+        from .world import World as Engine
+
+        scenes = list(scenes)
+        n_bodies = sum(len(s.bodies) for s in scenes)
+        with self._lock:
+            candidates = [
+                (w, step)
+                for w, step in self._idle
+                if step == stepping
+                and w.precision == precision
+                and w.layout.n_worlds == len(scenes)
+                and w.layout.n_bodies == n_bodies
+                and slots in (None, w.layout.slots)
+            ]
+        for entry in candidates:
+            with self._lock:
+                if entry not in self._idle:
+                    continue
+                self._idle.remove(entry)
+            try:
+                entry[0].reload(scenes, dt=dt, force_dt=force_dt)
+            except UsageError:  # another layout: the World is as it was
+                self.put(entry[0], stepping)
+                continue
+            except BaseException:
+                self.put(entry[0], stepping)
+                raise
+            self.reloaded += 1
+            return entry[0]
+        world = Engine(
+            scenes, dt=dt, precision=precision, slots=slots, force_dt=force_dt, stepping=stepping
+        )
+        self.built += 1
+        return world
+
+    def put(self, world, stepping: str = "auto") -> None:
+        """Give ``world`` back (built with ``stepping``): the next batch may take it."""
+        with self._lock:
+            self._idle.append((world, stepping))
+
+    @contextlib.contextmanager
+    def lease(self):
+        """``with pool.lease() as make: Simulation(scenes, worlds=make)``: the Worlds
+        ``make`` hands out go back to the pool on leaving."""
+        out: list[tuple[Any, str]] = []
+
+        def make(scenes, **kwargs):
+            world = self.get(scenes, **kwargs)
+            out.append((world, kwargs.get("stepping", "auto")))
+            return world
+
+        try:
+            yield make
+        finally:
+            for world, stepping in out:
+                self.put(world, stepping)
+
+
+# This process's Worlds: a Dask worker keeps them from one batch to the next.
+POOL = WorldPool()
+
+
 def run_batch(spec: dict) -> dict:
     """Run one batch (a Dask task, or in this process): its worlds as one Simulation.
 
-    Taichi starts on the first batch a process runs and stays up for the next ones. If the
-    batch fails (a world diverged or overflowed), each of its worlds is run again alone, so
-    that every world's result is the one it has alone.
+    Taichi starts on the first batch a process runs and stays up for the next ones, and
+    so do the Worlds (``POOL``): a batch of a layout this process has run before reuses
+    its World, its kernels compiled. ``spec["pad"]`` copies of the last world run along
+    (their results dropped). If the batch fails (a world diverged or overflowed), each of
+    its worlds is run again alone, so that every world's result is the one it has alone.
 
     Returns:
         ``{"id", "worker", "wall_time", "world_steps", "worlds": [{"key", "index", "status",
@@ -672,19 +865,22 @@ def run_batch(spec: dict) -> dict:
         world_scene(base, tuple(map(tuple, w["overrides"])), w["seed"], w["law"]) for w in worlds
     ]
 
-    def run(index: list[int]):
+    def run(index: list[int], pad: int = 0):
         paths = [worlds[i]["run"] for i in index]
         for p in paths:
             if p:
                 Path(p).parent.mkdir(parents=True, exist_ok=True)
-        ens = run_worlds(
-            [scenes[i] for i in index],
-            until=spec["until"],
-            out=paths if all(paths) else None,
-            arch=spec["arch"],
-            precision=spec["precision"],
-            window=spec["window"],
-        )
+        with POOL.lease() as make:
+            ens = run_worlds(
+                [scenes[i] for i in index] + [scenes[index[-1]]] * pad,
+                until=spec["until"],
+                out=paths if all(paths) and not pad else None,
+                arch=spec["arch"],
+                precision=spec["precision"],
+                slots=spec.get("slots"),
+                window=spec["window"],
+                worlds=make,
+            )
         return [
             {
                 "key": worlds[i]["key"],
@@ -698,7 +894,7 @@ def run_batch(spec: dict) -> dict:
             for i, m in zip(index, ens.metrics)
         ]
 
-    results = run(list(range(len(worlds))))
+    results = run(list(range(len(worlds))), spec.get("pad", 0))
     if len(worlds) > 1 and any(r["status"] != "complete" for r in results):
         results = [r for i in range(len(worlds)) for r in run([i])]
     return {
@@ -836,7 +1032,8 @@ def run_sweep(
         if scheduler is not None:
             n_workers = 0  # counted once connected
         batches = plan_batches(sweep, missing, max(n_workers, 1), arch)
-        specs = [batch_spec(sweep, b, runs_dir, arch, precision) for b in batches]
+        slots = contact_slots(sweep)
+        specs = [batch_spec(sweep, b, runs_dir, arch, precision, slots) for b in batches]
         say = _Reporter(progress, len(specs), len(missing), len(reused))
         say.start(scheduler or (f"{n_workers} Dask workers" if n_workers else "this process"))
         for spec, result, error in _execute(specs, n_workers, scheduler, say):

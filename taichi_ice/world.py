@@ -17,17 +17,18 @@ contact and integration code body by body. Both give bit-identical states.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
 
-from . import backend, state
+from . import backend, schema, state
 from .assemble import LIST_SLOTS, assemble
 from .broadphase import NeighbourList, SpatialHash
 from .codes import Status
 from .contact import ContactStage
 from .energy import EnergyMeter
-from .errors import CapacityError, DivergenceError
+from .errors import CapacityError, DivergenceError, UsageError
 from .integrate import Integrator
 from .stepper import WorldStepper
 
@@ -108,6 +109,72 @@ class World:
         )
         self.steps = 0
         self.time = 0.0
+
+    # ----------------------------------------------------------------------------------------
+    # Reuse: other scenes on the same fields and compiled kernels
+    # ----------------------------------------------------------------------------------------
+
+    def reload(self, scenes: Sequence, dt: float | None = None, force_dt: bool = False) -> None:
+        """Put ``scenes`` on this World's fields, as ``World(scenes, dt, ...)`` would start
+        them, without compiling anything again.
+
+        The kernels of a World specialise on its ``layout`` and close over its fields, so a
+        new World compiles every kernel anew (seconds to a minute); a World reloaded with
+        scenes of the same layout keeps them. The scenes are assembled with this World's
+        precision and contact slots (its capacities), every field is reset to its declared
+        start (``schema.groups()``: a fill with ``Var.init``, then the assembled ``HOST``
+        arrays), the outlines turned, the neighbour lists marked stale and the clock set to
+        0: stepping it gives, bit for bit, what a new ``World(scenes, dt, precision,
+        slots=self.layout.slots, force_dt=force_dt)`` gives. ``stepping`` stays as built.
+
+        Args:
+            scenes: the new worlds.
+            dt, force_dt: as for ``World`` (dt defaults to the smallest ``scene.dt``).
+
+        Raises:
+            UsageError: the scenes' layout is not this World's (other sizes or switches; the
+                message names what differs); the World is left as it was.
+            ValueError, ScenarioError, StabilityError: as ``assemble`` raises them.
+        """
+        batch = assemble(
+            scenes, dt=dt, precision=self.precision, slots=self.layout.slots, force_dt=force_dt
+        )
+        if batch.layout != self.layout:
+            raise UsageError(
+                "World.reload: the scenes need another layout than this World was compiled "
+                f"for ({_layout_difference(self.layout, batch.layout)}); build a new World "
+                "for them"
+            )
+        self.batch = batch
+        self.scenes = list(batch.scenes)
+        self.host = batch.host
+        self.dt, self.stable_dt = batch.dt, batch.stable_dt
+        fields = self._declared_fields()
+        for group in schema.groups().values():
+            for v in group:
+                if v.init != schema.HOST:
+                    fields[v.name].fill(v.init)
+        state.upload(self.model, self.data, self.host)
+        self.data.time_step[None] = self.dt
+        self.integrator.orient()
+        self.neighbours.world_nbr_stale.fill(1)
+        self.neighbours.nbr_rebuild[None] = 1
+        self.steps = 0
+        self.time = 0.0
+
+    def _declared_fields(self) -> dict:
+        """Every field declared in ``schema.groups()``, by name, from the groups of fields
+        this World holds (model, data, the hash's, the neighbour lists')."""
+        holders = [v for v in vars(self).values() if isinstance(v, state.Fields)]
+        found = {name: getattr(h, name) for h in holders for name in h.names}
+        declared = [v.name for g in schema.groups().values() for v in g]
+        missing = [name for name in declared if name not in found]
+        if missing:
+            raise RuntimeError(
+                f"World.reload: fields {missing} are declared in taichi_ice.schema but held by "
+                "no group of the World; reload cannot reset them"
+            )
+        return found
 
     # ----------------------------------------------------------------------------------------
     # The step
@@ -228,6 +295,16 @@ class World:
     def probe_slices(self) -> list[slice]:
         """Probe index range of each world."""
         return self.batch.probe_slices()
+
+
+def _layout_difference(have, want) -> str:
+    """``"n_worlds 3 here, 2 for the scenes, ..."``: the fields of two layouts that differ."""
+    diff = [
+        f"{f.name} {getattr(have, f.name)!r} here, {getattr(want, f.name)!r} for the scenes"
+        for f in dataclasses.fields(have)
+        if getattr(have, f.name) != getattr(want, f.name)
+    ]
+    return ", ".join(diff)
 
 
 __all__ = ["STAGES", "World"]

@@ -235,3 +235,91 @@ def test_the_example_sweep_is_valid():
     """sweeps/pillar.toml (the README's example): 7 laws x 2 area fractions x 8 layouts."""
     sweep = load_sweep("sweeps/pillar.toml")
     assert len(sweep.worlds()) == 112 and sweep.runs == {0}
+
+
+def _fields(world) -> dict:
+    """Every declared field of a World, as arrays."""
+    holders = (world.model, world.data, world.hash, world.neighbours)
+    return {name: getattr(h, name).to_numpy() for h in holders for name in h.names}
+
+
+def test_a_reloaded_world_steps_bit_for_bit_as_a_new_one():
+    """A World that has run other worlds (a block sliding on the floor under rate-and-state
+    friction: its contact holds xi and theta) and is reloaded with new ones holds, 300 steps
+    later, exactly the fields of a World built for the new ones (positions, velocities,
+    energies, contact memory, neighbour lists), even with the new blocks placed where the
+    old contacts are, so that memory left behind would be found. Worlds of another layout
+    are refused, naming what differs."""
+    from taichi_ice.errors import UsageError
+    from taichi_ice.friction import law_from_table
+    from taichi_ice.world import World
+
+    scene = load_scenario("sliding_block")
+
+    def worlds(*laws):
+        return [scene.with_friction(law_from_table({"law": law, **extra})) for law, extra in laws]
+
+    first = worlds(("rate-state", {}), ("memory-only", {}))
+    second = worlds(("rate-state", {"below_v_star": "healing"}), ("steady-state", {}))
+    reused = World(first)
+    reused.advance(301)
+    reused.check()
+    assert reused.contact_counts().tolist() == [1, 1]  # sliding: memory to forget
+    on_the_floor = reused.positions(), reused.angles()
+
+    with pytest.raises(UsageError, match="n_worlds 2 here, 3 for the scenes"):
+        reused.reload([*second, *first[:1]])
+    reused.reload(second)
+    assert reused.steps == 0 and reused.time == 0.0
+    fresh = World(second)
+    for world in (reused, fresh):
+        world.place(*on_the_floor)
+        world.advance(300)
+        world.check()
+    got, expected = _fields(reused), _fields(fresh)
+    assert got.keys() == expected.keys()
+    for name in expected:
+        assert np.array_equal(got[name], expected[name]), name
+    assert np.array_equal(reused.energies(), fresh.energies())
+    theta = got["contact_theta"][got["contact_partner"] >= 0]
+    assert theta.size and np.all(theta != 0.0)  # rate-and-state memory was compared
+
+
+def test_the_batches_of_a_layout_share_one_world_in_a_process(sweep_dir, monkeypatch):
+    """A sweep run in one process builds one World (one compilation of the kernels) for
+    all its batches of one layout: batches of 3, 3 and 2 (padded to 3) build one World and
+    reload it twice; the same sweep in batches of 4 gives the same dataset, value for
+    value."""
+    from taichi_ice import sweep as sweep_module
+    from taichi_ice.dataset import open_sweep
+    from taichi_ice.world import World
+
+    pool = sweep_module.WorldPool()
+    monkeypatch.setattr(sweep_module, "POOL", pool)
+    built = []
+    build = World.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(len(args[0]))
+        build(self, *args, **kwargs)
+
+    monkeypatch.setattr(World, "__init__", counted)
+    sweep = load_sweep(sweep_dir / "sweep.toml")
+    n = len(sweep.worlds())
+
+    by3 = run_sweep(
+        dataclasses.replace(sweep, batch_size=3), sweep_dir / "by3", workers=0, progress=False
+    )
+    assert by3.ran == list(range(n)) and not by3.failed_batches
+    got = open_sweep(by3.path)
+    assert len(set(got.batch.values)) == 3
+    assert built == [3] and (pool.built, pool.reloaded) == (1, 2)
+
+    by4 = run_sweep(
+        dataclasses.replace(sweep, batch_size=4), sweep_dir / "by4", workers=0, progress=False
+    )
+    assert by4.ran == list(range(n)) and not by4.failed_batches
+    assert built == [3, 4] and (pool.built, pool.reloaded) == (2, 3)
+    expected = open_sweep(by4.path)
+    assert (expected.status.values == "complete").all()
+    _equal(got, expected, [*sweep.metrics, "steps", "dt", "seed", "mu", "status"])

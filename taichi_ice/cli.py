@@ -127,7 +127,8 @@ def _run_scene(args, scene, out: str) -> int:
     print(
         f"{args.scene}: {scene.n_bodies} bodies, {law!r}, dt = {sim.dt:.3g} s "
         f"(limit {sim.world.stable_dt:.3g} s), {ran}/{args.precision}"
-        + (f"; {sim.dt_note}" if sim.dt_note else ""),
+        + (f"; {sim.dt_note}" if sim.dt_note else "")
+        + (f"; WARNING: {sim.forced_note}" if sim.forced_note else ""),
         file=sys.stderr,
     )
     result = sim.run(

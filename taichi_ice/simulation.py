@@ -42,8 +42,8 @@ class RunResult:
         paths: HDF5 files written (empty if ``out`` was None).
         steps: steps taken. dt: time step (s). wall_time: seconds of wall clock.
         status: 'complete' or 'failed'. failure: the error message if failed.
-        warning: why the result is suspect ("" if not): a budget residual past
-            ``RESIDUAL_WARNING``.
+        warning: why the result is suspect ("" if not): a dt forced above the stability
+            limit, a budget residual past ``RESIDUAL_WARNING``.
     """
 
     series: list[dict[str, np.ndarray]]
@@ -167,6 +167,14 @@ class Simulation:
             force_dt=force_dt,
             stepping=stepping,
         )
+        # Said, never silent either: a step forced above the stability limit.
+        self.forced_note = ""
+        if self.dt > self.world.stable_dt:
+            self.forced_note = (
+                f"dt = {self.dt:.4g} s is {self.dt / self.world.stable_dt:.3g} x the stability "
+                f"limit {self.world.stable_dt:.4g} s (forced): past what the contact "
+                "integration is known to resolve"
+            )
         # Kinetic and elastic energy at t = 0: the budget's starting capital.
         self.initial_energy = self.world.energies().copy()
 
@@ -187,7 +195,13 @@ class Simulation:
 
     def check(self) -> None:
         """Raise CapacityError or DivergenceError if the last steps overflowed or diverged."""
-        self.world.check()
+        try:
+            self.world.check()
+        except DivergenceError as exc:
+            if self.dt <= self.world.stable_dt:
+                raise
+            ratio = self.dt / self.world.stable_dt
+            raise DivergenceError(f"{exc}; dt is {ratio:.3g} x the limit (forced)") from None
 
     def positions(self, world: int = 0) -> np.ndarray:
         """``(N, 2)`` body centroids of one world (m)."""
@@ -332,7 +346,7 @@ class Simulation:
                     self.world.advance(stride)
                     k += stride
                     if k % self.series_every == 0 or k == n_end:
-                        self.world.check()
+                        self.check()
                         steps_since = k % self.series_every or self.series_every
                         self._sample(series, writers, sample_dt=steps_since * self.dt)
                         bar.update(k)
@@ -363,7 +377,7 @@ class Simulation:
                     for w in writers:
                         w.flush(self.world.steps)
                     self._checkpoint(ckpt_path, writers)
-            warning = self._budget_warning()
+            warning = "; ".join(w for w in (self.forced_note, self._budget_warning()) if w)
         except (TaichiIceError, KeyboardInterrupt) as exc:
             status = "failed"
             failure = str(exc) or type(exc).__name__
@@ -429,19 +443,34 @@ class Simulation:
         self._check_budget(energies)
 
     def _check_budget(self, energies: np.ndarray) -> None:
-        """Raise DivergenceError if a world holds or has dissipated far more energy than it
-        was given: an explicit integration past its limit creates energy from nothing."""
+        """Raise DivergenceError if a world's kinetic energy and what it dissipated far
+        exceed what came in (``budget.breached``): an explicit integration past its limit
+        creates energy from nothing."""
         bad = budget.breached(energies, self.initial_energy)
         if bad.size:
             w = int(bad[0])
             now = budget.as_series(energies[w])
             start = budget.as_series(self.initial_energy[w])
             raise DivergenceError(
-                f"world {w} created {-budget.residual(now, start):.4g} J of energy from "
-                f"{budget.came_in(now, start):.4g} J in at t = {self.world.time:.4g} s "
-                f"(dt = {self.dt:.3g} s); the run diverged: lower dt (or use dt = 'auto' "
+                f"world {w} created {float(budget.created(now, start)):.4g} J of energy from "
+                f"{float(budget.came_in(now, start)):.4g} J in (its kinetic energy and what it "
+                f"dissipated exceed what came in by over {100 * budget.BREACH:g} %) at t = "
+                f"{self.world.time:.4g} s; the run diverged{self._truth()}"
+            )
+
+    def _truth(self) -> str:
+        """How dt stands against the stability limit, and the fix, for a divergence."""
+        limit = self.world.stable_dt
+        if self.dt > limit:
+            return (
+                f": dt = {self.dt:.4g} s is {self.dt / limit:.3g} x the stability limit "
+                f"{limit:.4g} s (forced); lower dt below the limit (or use dt = 'auto' "
                 "without force_dt)"
             )
+        return (
+            f" at dt = {self.dt:.4g} s, {self.dt / limit:.3g} x the stability limit "
+            f"{limit:.4g} s: lower dt (or the scene's dt_safety)"
+        )
 
     def _frame(self, writers) -> None:
         if not writers:

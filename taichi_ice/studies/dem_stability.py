@@ -12,15 +12,15 @@ with short runs (``force_dt``), for
 - ``jam``: the pillar scene at mu = 0.9 until its jam carries its full load (17 s; ~3 MN);
 
 "survives" means the run ends without ``DivergenceError`` (the engine's checks: a
-non-finite or runaway velocity, or an energy budget that created more than half of what
-came in) or ``CapacityError`` (more contacts than slots: overlaps a resolved step never
-makes). Every trial also reports the budget residual over the energy that came in
-(positive: missing; negative: created) and the energy the bodies hold at the end over it
-(above 1: the step made energy). Near the limit the two differ: at large steps the
-contact dashpots' dissipation is booked too high, so the residual goes negative before the
-bodies gain energy, and the budget check can stop a run whose bodies have not (the free
-collision at 1.95 stable_dt holds 0.75 of the energy it was given, and books 0.76 of it as
-dissipated).
+non-finite or runaway velocity, or kinetic energy plus what was dissipated exceeding what
+came in by half of it, ``budget.breached``) or ``CapacityError`` (more contacts than
+slots: overlaps a resolved step never makes). Every trial also reports the budget residual
+over the energy that came in (positive: missing; negative: created) and the energy the
+bodies hold at the end over it (above 1: the step made energy). Near the limit the two
+differ: at large steps the contacts' work is booked at the start-of-step velocity, which
+books the dashpots' dissipation too high, so the residual goes negative before the bodies
+gain energy (the free collision at 1.95 stable_dt holds 0.75 of the energy it was given,
+and books 0.76 of it as dissipated).
 
 From the limits, ``recommend`` picks the default ``dt_safety``: the largest candidate that
 keeps ``MARGIN`` x in every scene (the jam's limit is the smallest) and whose errors in the

@@ -1,5 +1,6 @@
 # Two commands do everything on a fresh machine that has python3 and make:
-#   make run    set up .venv, then reproduce the paper (figures, runs, summaries) into out/
+#   make run    set up .venv, then reproduce the paper (figures, runs, summaries) into out/;
+#               after a kill, make run again continues where it stopped
 #   make test   set up .venv, then run the test suite
 PYTHON ?= python3
 VENV   := .venv
@@ -15,8 +16,11 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test,sweep]'
 	touch $(STAMP)
 
+# A reproduction stopped part-way (a ledger, no summary yet) continues where it stopped
+# (--resume); otherwise it starts anew (--overwrite).
 run: $(STAMP)
-	$(BIN)/taichi-ice paper --out $(OUT)/paper
+	$(BIN)/taichi-ice paper --out $(OUT)/paper $$(if [ -f $(OUT)/paper/paper-state.json ] \
+	  && [ ! -f $(OUT)/paper/summary.json ]; then echo --resume; else echo --overwrite; fi)
 
 validate: $(STAMP)
 	$(BIN)/taichi-ice validate --dem --out $(OUT)/validation

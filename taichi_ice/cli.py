@@ -34,11 +34,22 @@ EXAMPLES = {
   taichi-ice paper --out out/paper                  # Figures 3-6, budget, spread over 16 layouts,
                                                     # variants of the law, ice strength
   taichi-ice paper --out out/paper --seeds 0        # the four single runs only
-  taichi-ice paper --out /tmp/short --until 2 --seeds 2   # a smoke run""",
+  taichi-ice paper --out /tmp/short --until 2 --seeds 2   # a smoke run
+  taichi-ice paper --out out/paper --resume         # after a kill: finished models are kept
+
+With --out, each model's batch writes a checkpoint every 2 minutes of wall clock
+(--checkpoint-every); --resume skips Figure 3 and the models finished and continues the
+model that was stopped from its checkpoint (same options).""",
     "ensemble": """examples:
   taichi-ice ensemble scenarios/pillar.toml --seeds 32 --out out/ens
   taichi-ice ensemble scenarios/pillar.toml --seeds 8 --friction coulomb:0.3 \\
-      --friction rate-state:t_c=5 --until 10 --out out/ens""",
+      --friction rate-state:t_c=5 --until 10 --out out/ens
+  taichi-ice ensemble scenarios/pillar.toml --seeds 32 --out out/ens --checkpoint-every 10min
+  taichi-ice ensemble scenarios/pillar.toml --seeds 32 --out out/ens --resume   # after a kill
+
+--resume skips the laws finished (read back from their files) and continues the law that
+was stopped from its checkpoint (same scene and options): the files equal those of an
+ensemble never stopped.""",
     "bench": """examples:
   taichi-ice bench --out out/bench                  # 1e3, 1e4, 1e5 blocks; f64 and f32; Box2D
   taichi-ice bench --sizes 1e5 1e6 --precision f32 --arch gpu --no-box2d
@@ -173,6 +184,9 @@ def _cmd_paper(args) -> int:
         progress=not args.quiet,
         quick=args.quick,
         extras=not args.paper_only,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        checkpoint_every=args.checkpoint_every,
     )
     return 0
 
@@ -189,6 +203,9 @@ def _cmd_ensemble(args) -> int:
         arch=args.arch,
         precision=args.precision,
         progress=not args.quiet,
+        overwrite=args.overwrite,
+        resume=args.resume,
+        checkpoint_every=args.checkpoint_every,
     )
 
 
@@ -264,6 +281,30 @@ def _engine_options(p: argparse.ArgumentParser) -> None:
         "--until", type=_positive_float, default=None, help="end time, s (default: duration)"
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _folder_resume_options(p: argparse.ArgumentParser, every: str | None = None) -> None:
+    """--overwrite, --resume and --checkpoint-every of a command that writes a folder of runs
+    (``taichi_ice.ledger``); ``every``: the default interval."""
+    p.add_argument(
+        "--checkpoint-every",
+        type=parse_duration,
+        default=parse_duration(every) if every else None,
+        metavar="DURATION",
+        help="write the whole state of the batch that runs to a checkpoint every DURATION of "
+        "wall clock (30s, 10min, 1h), and when stopped by Ctrl-C or SIGTERM"
+        + (f" (default {every})" if every else ""),
+    )
+    again = p.add_mutually_exclusive_group()
+    again.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in --out that was stopped: what finished is kept, the part that "
+        "was running continues from its checkpoint (same options)",
+    )
+    again.add_argument(
+        "--overwrite", action="store_true", help="start anew over an earlier run in --out"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -352,6 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
         "steady-state, memory-only) over the same layouts and the two runs with an ice "
         "strength",
     )
+    _folder_resume_options(p, every="2min")
 
     p = add(
         "ensemble",
@@ -368,6 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a law to run (repeatable; default the scene's): coulomb[:MU], rate-state[:..]",
     )
     _engine_options(p)
+    _folder_resume_options(p)
 
     from .study import add_options as study_options
     from .sweep import add_options as sweep_options

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from . import budget
-from .errors import TaichiIceError
+from .errors import Interrupted, RunFileError, TaichiIceError, UsageError
 from .simulation import RunResult
 
 METRICS = (
@@ -183,6 +183,9 @@ def run_ensemble(
     slots: int | None = None,
     window: float = 1.0,
     progress: bool = False,
+    checkpoint_every: float | None = None,
+    resume: bool = False,
+    worlds=None,
 ) -> EnsembleResult:
     """Run ``scene`` reseeded with every seed, all seeds as worlds of one Simulation.
 
@@ -195,6 +198,10 @@ def run_ensemble(
         arch, precision, dt, slots: as for ``Simulation``.
         window: the concentration window (s).
         progress: progress bar on stderr.
+        checkpoint_every, resume: as for ``Simulation.run`` (they need ``out``): one
+            checkpoint holds every world of the batch, beside the first world's file.
+        worlds: what makes the World, as for ``Simulation`` (``sweep.WorldPool``: a World
+            compiled for the same layout, reloaded).
 
     Returns:
         EnsembleResult. A run that diverges or overflows does not raise: its files are
@@ -202,6 +209,8 @@ def run_ensemble(
 
     Raises:
         ScenarioError: a seed's jitter makes blocks overlap at the start.
+        Interrupted, KeyboardInterrupt: the run was stopped (SIGINT, SIGTERM); its files are
+            kept, and with checkpoints ``resume`` continues it.
     """
     seeds = [int(s) for s in seeds]
     if not seeds:
@@ -211,8 +220,7 @@ def run_ensemble(
     if friction is not None:
         scene = scene.with_friction(friction)
     if isinstance(out, (str, Path)):
-        width = max(4, len(str(max(seeds))))
-        out = [Path(out) / f"seed-{s:0{width}d}.h5" for s in seeds]
+        out = seed_paths(out, seeds)
     return run_worlds(
         [scene.reseeded(s) for s in seeds],
         label=scene.friction.label,
@@ -224,7 +232,16 @@ def run_ensemble(
         slots=slots,
         window=window,
         progress=progress,
+        checkpoint_every=checkpoint_every,
+        resume=resume,
+        worlds=worlds,
     )
+
+
+def seed_paths(folder: str | Path, seeds: Sequence[int]) -> list[Path]:
+    """The run file of each seed in ``folder``: ``seed-XXXX.h5`` (wider for large seeds)."""
+    width = max(4, len(str(max(seeds))))
+    return [Path(folder) / f"seed-{s:0{width}d}.h5" for s in seeds]
 
 
 def run_worlds(
@@ -240,21 +257,37 @@ def run_worlds(
     window: float = 1.0,
     progress: bool = False,
     worlds=None,
+    checkpoint_every: float | None = None,
+    resume: bool = False,
 ) -> EnsembleResult:
     """Run ``scenes`` (any layouts, laws and settings one batch can share, see
     ``assemble.assemble``) as the worlds of one Simulation and compute each one's metrics.
 
     ``run_ensemble`` is this over the seeds of one scene; a sweep runs its batches with it.
     Arguments and result as ``run_ensemble``'s (``out``: one path per scene, or None);
-    ``worlds`` as ``Simulation``'s (what makes the World: a sweep reuses compiled ones).
+    ``worlds`` as ``Simulation``'s (what makes the World: a sweep reuses compiled ones);
+    ``checkpoint_every`` and ``resume`` as ``Simulation.run``'s.
+
+    A run stopped by SIGINT or SIGTERM raises (``Interrupted``): it has not failed, it is
+    unfinished, and a resume (or a sweep run again) must run it.
     """
     from .simulation import Simulation
 
     scenes = list(scenes)
     sim = Simulation(scenes, arch=arch, precision=precision, dt=dt, slots=slots, worlds=worlds)
     try:
-        result = sim.run(until=until, out=out, progress=progress)
+        result = sim.run(
+            until=until,
+            out=out,
+            progress=progress,
+            checkpoint_every=checkpoint_every,
+            resume=resume,
+        )
+    except Interrupted:
+        raise
     except TaichiIceError as exc:
+        if not hasattr(exc, "result"):  # refused before any step (an output, a checkpoint)
+            raise
         result = exc.result
     return EnsembleResult(
         **vars(result),
@@ -262,6 +295,86 @@ def run_worlds(
         seeds=[s.simulation.seed for s in scenes],
         metrics=[run_metrics(s, window) for s in result.series],
     )
+
+
+def load_worlds(
+    paths: Sequence[str | Path],
+    record: dict,
+    *,
+    label: str = "",
+    seeds: Sequence[int] = (),
+    window: float = 1.0,
+) -> EnsembleResult:
+    """A batch that finished earlier, read back: the series from its run files (as written,
+    so the metrics are those the run computed, bit for bit), and ``record`` (``status``,
+    ``failure``, ``warning``, ``steps``, ``dt``, ``wall_time``: what a ledger kept of it)."""
+    from .io import read_run
+
+    series = [read_run(p)["series"] for p in paths]
+    return EnsembleResult(
+        series=series,
+        paths=[Path(p) for p in paths],
+        steps=int(record["steps"]),
+        dt=float(record["dt"]),
+        wall_time=float(record["wall_time"]),
+        status=str(record["status"]),
+        failure=str(record["failure"]),
+        warning=str(record.get("warning", "")),
+        label=label,
+        seeds=[int(s) for s in seeds],
+        metrics=[run_metrics(s, window) for s in series],
+    )
+
+
+def record_of(ens: EnsembleResult) -> dict:
+    """What a ledger keeps of a finished batch, besides its run files (``load_worlds``)."""
+    return {
+        "status": ens.status,
+        "failure": ens.failure,
+        "warning": ens.warning,
+        "steps": int(ens.steps),
+        "dt": float(ens.dt),
+        "wall_time": float(ens.wall_time),
+    }
+
+
+def run_part(ledger, part: str, paths: Sequence[Path], run, *, label="", seeds=()):
+    """One batch of a resumable command (``ensemble``, ``paper``): read back if the ledger
+    says it finished; else continued from its checkpoint if it was started and wrote one;
+    else run from its start. ``run(checkpoint_every=, resume=, worlds=)`` runs it
+    (``run_ensemble``); its World comes from this process's ``sweep.POOL``, so the batches of
+    one layout (laws of one kind, a resumed batch) compile the kernels once.
+    """
+    from . import checkpoint
+    from .sweep import POOL
+
+    record = ledger.done(part)
+    if record is not None:
+        try:
+            return load_worlds(paths, record, label=label, seeds=seeds)
+        except RunFileError as exc:
+            raise RunFileError(
+                f"{part} finished earlier, but its run files cannot be read back ({exc}); "
+                "start anew with --overwrite"
+            ) from None
+    ckpt = checkpoint.path_for(paths[0])
+    resume = ledger.resumed and ledger.started(part) and ckpt.is_file()
+    if not resume:
+        checkpoint.remove(ckpt)  # another run's, or a part that never reached one
+        ledger.start(part)
+    try:
+        with POOL.lease() as make:
+            ens = run(checkpoint_every=ledger.checkpoint_every, resume=resume, worlds=make)
+    except Interrupted as exc:
+        if "--resume" in str(exc):  # it wrote a checkpoint, and says so
+            raise
+        raise Interrupted(
+            f"{exc}; --resume keeps what finished and continues {part} from its last "
+            "checkpoint (from its start if it wrote none)"
+        ) from None
+    ledger.finish(part, **record_of(ens))
+    checkpoint.remove(ckpt)  # a finished part is read back, never continued
+    return ens
 
 
 def ensemble_command(
@@ -273,74 +386,125 @@ def ensemble_command(
     arch: str = "cpu",
     precision: str = "f64",
     progress: bool = True,
+    *,
+    overwrite: bool = False,
+    resume: bool = False,
+    checkpoint_every: float | None = None,
 ) -> int:
     """The body of ``taichi-ice ensemble``: each law over ``n_seeds`` layouts.
 
     Writes ``out/<law>/seed-XXXX.h5`` (every world), ``out/ensemble.json`` (metrics per seed
     and their distribution per law), ``out/ensemble.csv`` (one row per law and seed) and
     ``out/ensemble.png`` (the spread chart).
+
+    Resumable (``taichi_ice.ledger``): ``out/ensemble-state.json`` records the options and the
+    laws finished. ``resume`` reads the laws finished back from their files, continues the
+    interrupted one from its checkpoint (``checkpoint_every``: wall-clock seconds between
+    checkpoints of a law's batch, None for none) and runs the rest: every file equals that of
+    an ensemble never stopped (but the wall times). An earlier ensemble's output is refused
+    unless ``resume`` or ``overwrite``.
     """
     import csv
     import json
     import sys
 
     from .io import check_folder
+    from .ledger import Ledger, scene_digest
     from .plots import plot_spread
     from .scenario import load_scenario
 
     out = check_folder(out)  # before any work
     scene = load_scenario(scene_path)
     seeds = [scene.simulation.seed + k for k in range(n_seeds)]
-    results: dict[str, EnsembleResult] = {}
+    named: list[tuple[str, object]] = []  # (label, law or None: the scene's)
     for law in laws:
         label = (law if law is not None else scene.friction).label
-        if label in results:
-            raise ValueError(f"--friction {label} given twice")
-        if progress:
-            print(f"ensemble: {label}, {len(seeds)} layouts", file=sys.stderr, flush=True)
-        ens = run_ensemble(
-            scene,
-            seeds,
-            law,
-            until=until,
-            out=out / label,
-            arch=arch,
-            precision=precision,
-            progress=progress,
-        )
-        results[label] = ens
-        summary = ens.summary()
-        peak = summary["peak_force"].get("median", math.nan)
-        energy = summary["friction_energy"].get("median", math.nan)
-        print(
-            f"{label}: {ens.status} in {ens.wall_time:.1f} s ({ens.steps} steps x "
-            f"{len(seeds)} worlds); median peak force {peak / 1e3:.3g} kN, median friction "
-            f"energy {energy:.4g} J"
-            + (f"; FAILED: {ens.failure}" if ens.status != "complete" else "")
-        )
-    report = {
-        "scene": str(scene.source),
+        if label in (n for n, _ in named):
+            raise UsageError(f"--friction {label} given twice: give each law once")
+        named.append((label, law))
+    options = {
+        "scene": scene_digest(scene),
         "seeds": seeds,
-        "laws": {
-            label: {
-                "status": ens.status,
-                "failure": ens.failure,
-                "steps": ens.steps,
-                "dt": ens.dt,
-                "wall_time": ens.wall_time,
-                "metrics": ens.metrics,
-                "summary": ens.summary(),
-            }
-            for label, ens in results.items()
-        },
+        "laws": [
+            [label, (law if law is not None else scene.friction).to_dict()] for label, law in named
+        ],
+        "until": scene.simulation.duration if until is None else float(until),
+        "arch": arch,
+        "precision": precision,
     }
-    (out / "ensemble.json").write_text(json.dumps(report, indent=2) + "\n")
-    with open(out / "ensemble.csv", "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["law", "seed", *METRICS])
-        for label, ens in results.items():
-            for seed, m in zip(ens.seeds, ens.metrics):
-                writer.writerow([label, seed, *(m[k] for k in METRICS)])
-    plot_spread(results, out / "ensemble.png")
+    reports = [out / f"ensemble.{ext}" for ext in ("json", "csv", "png")]
+    outputs = reports + [out / label for label, _ in named]
+    results: dict[str, EnsembleResult] = {}
+    with Ledger(
+        out,
+        "ensemble",
+        options,
+        resume=resume,
+        overwrite=overwrite,
+        outputs=outputs,
+        checkpoint_every=checkpoint_every,
+    ) as ledger:
+        if not resume:
+            for path in reports:  # an earlier ensemble's: reports say it finished
+                path.unlink(missing_ok=True)
+        for label, law in named:
+            paths = seed_paths(out / label, seeds)
+            finished = ledger.done(label) is not None
+            if progress:
+                print(
+                    f"ensemble: {label}, {len(seeds)} layouts"
+                    + (" (finished earlier: read back)" if finished else ""),
+                    file=sys.stderr,
+                    flush=True,
+                )
+
+            def run(law=law, paths=paths, **kw):
+                return run_ensemble(
+                    scene,
+                    seeds,
+                    law,
+                    until=until,
+                    out=paths,
+                    arch=arch,
+                    precision=precision,
+                    progress=progress,
+                    **kw,
+                )
+
+            ens = run_part(ledger, label, paths, run, label=label, seeds=seeds)
+            results[label] = ens
+            summary = ens.summary()
+            peak = summary["peak_force"].get("median", math.nan)
+            energy = summary["friction_energy"].get("median", math.nan)
+            print(
+                f"{label}: {ens.status} in {ens.wall_time:.1f} s ({ens.steps} steps x "
+                f"{len(seeds)} worlds); median peak force {peak / 1e3:.3g} kN, median friction "
+                f"energy {energy:.4g} J"
+                + (f"; FAILED: {ens.failure}" if ens.status != "complete" else "")
+            )
+        report = {
+            "scene": str(scene.source),
+            "seeds": seeds,
+            "laws": {
+                label: {
+                    "status": ens.status,
+                    "failure": ens.failure,
+                    "steps": ens.steps,
+                    "dt": ens.dt,
+                    "wall_time": ens.wall_time,
+                    "metrics": ens.metrics,
+                    "summary": ens.summary(),
+                }
+                for label, ens in results.items()
+            },
+        }
+        (out / "ensemble.json").write_text(json.dumps(report, indent=2) + "\n")
+        with open(out / "ensemble.csv", "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(["law", "seed", *METRICS])
+            for label, ens in results.items():
+                for seed, m in zip(ens.seeds, ens.metrics):
+                    writer.writerow([label, seed, *(m[k] for k in METRICS)])
+        plot_spread(results, out / "ensemble.png")
     print(f"wrote {out}/ensemble.json, ensemble.csv, ensemble.png and the runs")
     return 0 if all(e.status == "complete" for e in results.values()) else 1

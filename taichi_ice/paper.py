@@ -16,6 +16,11 @@ Writes into DIR:
 - ``summary.json`` and ``summary.md``: per model the single run's metrics (see
   ``taichi_ice.ensemble``), the distribution over layouts, and whether the paper's
   findings hold across layouts.
+- ``paper-state.json``: the options and the parts finished (``taichi_ice.ledger``), so that
+  ``taichi-ice paper --out DIR --resume`` continues a reproduction that was stopped: Figure 3
+  and the models finished are read back, the model that was running continues from its
+  checkpoint (``RUN.h5.ckpt`` beside its first run file, every ``CHECKPOINT_EVERY`` of wall
+  clock), the rest run.
 """
 
 from __future__ import annotations
@@ -71,6 +76,10 @@ PAPER_FINDINGS = {
 
 SNAPSHOT_EVERY = 4.0  # s between the bird's-eye views of Figure 4, as in the paper
 
+# Wall-clock seconds between checkpoints of a model's batch (``--checkpoint-every``): a kill
+# loses at most this much of the model it stops.
+CHECKPOINT_EVERY = 120.0
+
 
 def models():
     """The paper's four friction models, ``(label, law)`` in its order."""
@@ -107,6 +116,10 @@ def reproduce(
     progress: bool = True,
     quick: bool = False,
     extras: bool = True,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    checkpoint_every: float | None = CHECKPOINT_EVERY,
 ) -> dict:
     """Run the whole reproduction into ``out``; returns the summary written to summary.json.
 
@@ -120,55 +133,114 @@ def reproduce(
         quick: small sizes for Figure 3 (tests).
         extras: also run the ``variants`` over the same layouts and rate-and-state with an
             ice strength of each of ``STRENGTHS`` (the scene's own layout).
+        resume: continue an earlier reproduction in ``out`` that was stopped: Figure 3 and
+            the models it finished are read back, the model it was running continues from
+            its checkpoint, the rest run (``taichi_ice.ledger``; the options must be the
+            same). Without it, an earlier reproduction's output is refused unless
+            ``overwrite``.
+        checkpoint_every: wall-clock seconds between checkpoints of a model's Simulation
+            (default ``CHECKPOINT_EVERY``); None for none (a resume then reruns the model
+            that was stopped from its start).
     """
     from .io import check_folder
+    from .ledger import Ledger, scene_digest
     from .scenario import load_scenario
-    from .studies import single_interface
 
     if seeds < 0:
         raise ValueError(f"--seeds {seeds}: must be 0 or more")
     out = check_folder(out)  # before any work
     runs, figures = out / "runs", out / "figures"
-    figures.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     scene = load_scenario(scene_path)
     until = scene.simulation.duration if until is None else float(until)
+    options = {
+        "scene": scene_digest(scene),
+        "seeds": seeds,
+        "until": until,
+        "arch": arch,
+        "precision": precision,
+        "quick": quick,
+        "extras": extras,
+    }
+    reports = [out / "summary.json", out / "summary.md"]
+    with Ledger(
+        out,
+        "paper",
+        options,
+        resume=resume,
+        overwrite=overwrite,
+        outputs=[*reports, runs, figures],
+        checkpoint_every=checkpoint_every,
+    ) as ledger:
+        # Wall time of the parts an earlier, stopped reproduction finished: the summary's
+        # wall time is the whole reproduction's, not this process's.
+        done = [ledger.done(part) for part in ledger.parts]
+        earlier = sum(float(d.get("wall_time", 0.0)) for d in done if d)
+        if not resume:
+            for path in reports:  # an earlier reproduction's: a summary says it finished
+                path.unlink(missing_ok=True)
+        figures.mkdir(parents=True, exist_ok=True)
+        results = _reproduce(
+            ledger, scene, runs, figures, seeds, until, arch, precision, progress, quick, extras
+        )
 
-    _say(progress, "paper: Figure 3, the friction law on one interface against its exact solution")
-    single_interface.run(figures, quick=quick)
+        _say(progress, "paper: figures")
+        paper_models = {label: results[label] for label, _ in models()}
+        files = {label: ens.paths[0] for label, ens in paper_models.items()}
+        plot_positions(files, figures / "fig4_positions.png")
+        plot_pillar_force(paper_models, figures / "fig5_pillar_force.png")
+        plot_friction_energy(results, figures / "fig6_friction_energy.png")
+        plot_energy_budget(paper_models, figures / "energy_budget.png")
+        if seeds:
+            plot_spread(
+                {k: e for k, e in results.items() if len(e.seeds) > 1},
+                figures / "fig_spread.png",
+                single=True,
+                titles=MODEL_TITLES,
+                colours=MODEL_COLOURS,
+            )
+
+        summary = build_summary(results, scene, until, arch, precision, seeds)
+        summary["wall_time"] = time.perf_counter() - start + earlier
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=True) + "\n")
+        (out / "summary.md").write_text(summary_markdown(summary))
+    _say(progress, f"paper: done in {summary['wall_time']:.0f} s; results in {out}/")
+    return summary
+
+
+def _reproduce(
+    ledger, scene, runs, figures, seeds, until, arch, precision, progress, quick, extras
+) -> dict[str, EnsembleResult]:
+    """The parts of ``reproduce``: Figure 3 and a batch per model, each skipped when the
+    ledger says it finished (``ensemble.run_part``)."""
+    from .ensemble import run_part
+    from .studies import single_interface
+
+    if ledger.done("fig3"):
+        _say(progress, "paper: Figure 3: finished earlier")
+    else:
+        _say(
+            progress,
+            "paper: Figure 3, the friction law on one interface against its exact solution",
+        )
+        t0 = time.perf_counter()
+        ledger.start("fig3")
+        single_interface.run(figures, quick=quick)
+        ledger.finish("fig3", wall_time=time.perf_counter() - t0)
 
     base = scene.simulation.seed
     layout_seeds = [base] + [base + k for k in range(1, seeds + 1)]
-    results: dict[str, EnsembleResult] = {}
-    for label, law in models() + (variants() if extras else []):
-        _say(
-            progress,
-            f"paper: {label}: {len(layout_seeds)} layout(s) x {scene.n_bodies} bodies, "
-            f"{until:g} s, {arch}/{precision}",
-        )
-        paths = [runs / f"{label}.h5"] + [
-            runs / "spread" / label / f"seed-{s:04d}.h5" for s in layout_seeds[1:]
-        ]
-        ens = run_ensemble(
+    batches = [
+        (
+            label,
             scene,
-            layout_seeds,
             law,
-            until=until,
-            out=paths,
-            arch=arch,
-            precision=precision,
-            progress=progress,
+            layout_seeds,
+            [runs / f"{label}.h5"]
+            + [runs / "spread" / label / f"seed-{s:04d}.h5" for s in layout_seeds[1:]],
         )
-        results[label] = ens
-        m = ens.metrics[0]
-        _say(
-            progress,
-            f"paper: {label}: {ens.status} in {ens.wall_time:.0f} s; single run: peak "
-            f"{m['peak_force'] / 1e3:.3g} kN, friction {m['friction_energy']:.4g} J, "
-            f"budget residual {100 * m['residual_rel']:.2g} %"
-            + (f"; FAILED: {ens.failure}" if ens.status != "complete" else ""),
-        )
-
+        for label, law in models() + (variants() if extras else [])
+    ]
     if extras:
         from .friction import RateState
         from .scenario import scene_from_dict
@@ -178,40 +250,42 @@ def reproduce(
             raw = dict(scene.raw)
             raw["ice"] = {**raw.get("ice", {}), "crushing_strength": strength}
             strong = scene_from_dict(raw, source=scene.source)
-            _say(progress, f"paper: {label}: the scene's layout, {until:g} s")
-            results[label] = run_ensemble(
-                strong,
-                [base],
-                RateState(),
+            batches.append((label, strong, RateState(), [base], [runs / f"{label}.h5"]))
+
+    results: dict[str, EnsembleResult] = {}
+    for label, batch_scene, law, batch_seeds, paths in batches:
+        finished = ledger.done(label) is not None
+        _say(
+            progress,
+            f"paper: {label}: {len(batch_seeds)} layout(s) x {batch_scene.n_bodies} bodies, "
+            f"{until:g} s, {arch}/{precision}"
+            + (": finished earlier, read back" if finished else ""),
+        )
+
+        def run(batch_scene=batch_scene, law=law, batch_seeds=batch_seeds, paths=paths, **kw):
+            return run_ensemble(
+                batch_scene,
+                batch_seeds,
+                law,
                 until=until,
-                out=[runs / f"{label}.h5"],
+                out=paths,
                 arch=arch,
                 precision=precision,
                 progress=progress,
+                **kw,
             )
 
-    _say(progress, "paper: figures")
-    paper_models = {label: results[label] for label, _ in models()}
-    files = {label: ens.paths[0] for label, ens in paper_models.items()}
-    plot_positions(files, figures / "fig4_positions.png")
-    plot_pillar_force(paper_models, figures / "fig5_pillar_force.png")
-    plot_friction_energy(results, figures / "fig6_friction_energy.png")
-    plot_energy_budget(paper_models, figures / "energy_budget.png")
-    if seeds:
-        plot_spread(
-            {k: e for k, e in results.items() if len(e.seeds) > 1},
-            figures / "fig_spread.png",
-            single=True,
-            titles=MODEL_TITLES,
-            colours=MODEL_COLOURS,
+        ens = run_part(ledger, label, paths, run, label=law.label, seeds=batch_seeds)
+        results[label] = ens
+        m = ens.metrics[0]
+        _say(
+            progress,
+            f"paper: {label}: {ens.status} in {ens.wall_time:.0f} s; single run: peak "
+            f"{m['peak_force'] / 1e3:.3g} kN, friction {m['friction_energy']:.4g} J, "
+            f"budget residual {100 * m['residual_rel']:.2g} %"
+            + (f"; FAILED: {ens.failure}" if ens.status != "complete" else ""),
         )
-
-    summary = build_summary(results, scene, until, arch, precision, seeds)
-    summary["wall_time"] = time.perf_counter() - start
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=True) + "\n")
-    (out / "summary.md").write_text(summary_markdown(summary))
-    _say(progress, f"paper: done in {summary['wall_time']:.0f} s; results in {out}/")
-    return summary
+    return results
 
 
 def _say(enabled: bool, text: str) -> None:

@@ -77,7 +77,7 @@ import numpy as np
 from ._version import __version__
 from .codes import ThetaMethod
 from .ensemble import METRICS
-from .errors import ScenarioError, TaichiIceError
+from .errors import Interrupted, ScenarioError, TaichiIceError
 from .table import Table, check_keys, is_number, type_name
 
 __all__ = [
@@ -1097,6 +1097,8 @@ def _execute(specs: list[dict], workers: int, scheduler: str | None, say):
         for spec in specs:
             try:
                 yield spec, run_batch(spec), None
+            except Interrupted:  # Ctrl-C, SIGTERM: the sweep stops (a resume runs the batch)
+                raise
             except TaichiIceError as exc:
                 yield spec, None, str(exc)
         return

@@ -1,9 +1,12 @@
 """Checkpoint and resume: a run killed after a checkpoint and resumed equals, bit for bit, the
-run that was never stopped; with rate-and-state contacts jammed between a pusher and a wall."""
+run that was never stopped; with rate-and-state contacts jammed between a pusher and a wall.
+So does an ensemble (every world of a batch in one checkpoint, the laws finished read back),
+and a paper run resumed skips what it finished."""
 
 from __future__ import annotations
 
 import copy
+import json
 
 import h5py
 import numpy as np
@@ -11,10 +14,12 @@ import pytest
 
 from taichi_ice import Simulation, load_scenario
 from taichi_ice import checkpoint as ckpt
+from taichi_ice.cli import main
 from taichi_ice.errors import RunFileError
 from taichi_ice.io import RunWriter, read_run
 from taichi_ice.scenario import scene_from_dict
 from taichi_ice.slip import NO_INTERFACE
+from taichi_ice.tomlio import dump_toml
 
 UNTIL = 0.3  # s
 STOP_AT_FLUSH = 4  # the run is killed at its 4th frame write, after 3 checkpoints
@@ -135,3 +140,164 @@ def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp
     ckpt.remove(ckpt.path_for(path))
     with pytest.raises(RunFileError, match="no checkpoint"):
         Simulation(scene).run(until=UNTIL, out=path, resume=True)
+
+
+# --------------------------------------------------------------------------------------------
+# Commands made of batches: `taichi-ice ensemble` and `taichi-ice paper`
+# --------------------------------------------------------------------------------------------
+
+
+def jam_file(tmp_path):
+    """The jam as a scene file, with two loose squares drifting at jittered speeds beside it:
+    every seed is another world (``Scene.reseeded``), the jam in each."""
+    raw = copy.deepcopy(dict(jam().raw))
+    raw["field"] = [
+        {
+            "name": "drift",
+            "shape": "rectangle",
+            "width": 0.5,
+            "length": 0.5,
+            "rows": 1,
+            "columns": 2,
+            "origin": [0.0, 3.0],
+            "spacing": [0.52, 1.0],
+            "jitter": 0.003,
+            "velocity_jitter": 0.1,
+        }
+    ]
+    path = tmp_path / "jam.toml"
+    path.write_text(dump_toml(raw))
+    return path
+
+
+def die_at(monkeypatch, path, n):
+    """Raise KeyboardInterrupt (a kill) at the ``n``-th flush of run file ``path``."""
+    flush = RunWriter.flush
+    calls = {"n": 0}
+
+    def flush_then_die(self, steps, **attrs):
+        if self.path == path:
+            calls["n"] += 1
+            if calls["n"] == n:
+                raise KeyboardInterrupt
+        flush(self, steps, **attrs)
+
+    monkeypatch.setattr(RunWriter, "flush", flush_then_die)
+    return flush
+
+
+def one_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def assert_same_runs(a, b):
+    for group in ("series", "frames", "bodies"):
+        assert a[group].keys() == b[group].keys()
+        for name, values in a[group].items():
+            np.testing.assert_array_equal(b[group][name], values, err_msg=f"{group}/{name}")
+
+
+def test_a_resumed_ensemble_equals_the_uninterrupted_one_value_for_value(
+    tmp_path, monkeypatch, capsys
+):
+    """Two rate-and-state laws over 3 seeds; killed in the second law after 3 checkpoints of
+    its batch, refused when resumed with other options, then resumed: the first law is read
+    back (its files untouched), the second continues from its checkpoint, and every CSV row,
+    JSON value (but wall times) and run file equals the ensemble that was never stopped."""
+    scene = jam_file(tmp_path)
+    argv = ["ensemble", str(scene), "--seeds", "3", "--until", str(UNTIL), "--quiet"]
+    argv += ["--friction", "rate-state", "--friction", "rate-state:t_c=0.5"]
+    whole, out = tmp_path / "whole", tmp_path / "killed"
+    assert main([*argv, "--out", str(whole)]) == 0
+
+    second = out / "rate-state_t_c0.5"
+    flush = die_at(monkeypatch, second / "seed-0000.h5", STOP_AT_FLUSH)
+    assert main([*argv, "--out", str(out), "--checkpoint-every", "0"]) == 130
+    monkeypatch.setattr(RunWriter, "flush", flush)
+    saved = ckpt.read(ckpt.path_for(second / "seed-0000.h5"))
+    assert saved["attrs"]["n_frames"] == [STOP_AT_FLUSH] * 3  # t = 0, ..., 0.15 s
+    # Every world of the batch is in the checkpoint, in rate-and-state contact.
+    assert len(saved["attrs"]["scenarios"]) == 3
+    theta = saved["data"]["contact_theta"]
+    assert np.any((theta != NO_INTERFACE) & (theta != 0.0))
+    assert not (out / "ensemble.csv").exists()
+    first = sorted((out / "rate-state").glob("seed-*.h5"))
+    assert len(first) == 3 and not list((out / "rate-state").glob("*.ckpt"))
+    stamps = [p.stat().st_mtime_ns for p in first]
+    capsys.readouterr()
+
+    # Without --resume the folder is refused; with other options the resume is.
+    assert main([*argv, "--out", str(out)]) == 2
+    assert "pass --resume" in one_line(capsys.readouterr().err)
+    other = [a if a != str(UNTIL) else "0.25" for a in argv]
+    assert main([*other, "--out", str(out), "--resume"]) == 2
+    assert "until: 0.3 there, 0.25 now" in one_line(capsys.readouterr().err)
+    assert main([*argv, "--out", str(tmp_path / "none"), "--resume"]) == 2
+    assert "no ensemble to resume" in one_line(capsys.readouterr().err)
+
+    assert main([*argv, "--out", str(out), "--resume"]) == 0
+    assert [p.stat().st_mtime_ns for p in first] == stamps  # read back, not run again
+    assert (out / "ensemble.csv").read_text() == (whole / "ensemble.csv").read_text()
+    a, b = (json.loads((d / "ensemble.json").read_text()) for d in (whole, out))
+    for report in (a, b):
+        for law in report["laws"].values():
+            law.pop("wall_time")
+    assert a == b
+    assert np.isfinite(a["laws"]["rate-state"]["metrics"][0]["peak_force"])
+    for path in sorted(whole.glob("*/seed-*.h5")):
+        run = read_run(out / path.relative_to(whole))
+        assert run["attrs"]["status"] == "complete"
+        assert run["attrs"]["resumed"] == (1 if path.parent.name == second.name else 0)
+        assert_same_runs(read_run(path), run)
+    # The worlds differ (the seeds drew other drifts), and the jam pushed on its probes.
+    runs = [read_run(p) for p in sorted((whole / "rate-state").glob("seed-*.h5"))]
+    assert not np.array_equal(runs[0]["frames"]["position"], runs[1]["frames"]["position"])
+    assert np.max(np.abs(runs[0]["series"]["probe_force"])) > 0.0
+    assert not list(out.glob("*/*.ckpt"))  # finished batches keep no checkpoint
+
+
+def test_a_resumed_paper_run_skips_the_parts_finished(tmp_path, monkeypatch, capsys):
+    """`taichi-ice paper` (a small scene, 0.1 s, the four models) killed in its third model:
+    the resume neither redraws Figure 3 nor reruns the two models finished, continues the
+    third from its checkpoint and runs the fourth; the summary holds all four."""
+    from taichi_ice.studies import single_interface
+
+    scene = jam_file(tmp_path)
+    out = tmp_path / "paper"
+    argv = ["paper", "--scene", str(scene), "--out", str(out), "--until", "0.1", "--seeds", "2"]
+    argv += ["--paper-only", "--quick", "--quiet", "--checkpoint-every", "0"]
+    flush = die_at(monkeypatch, out / "runs" / "mu0.9.h5", 2)
+    assert main(argv) == 130
+    monkeypatch.setattr(RunWriter, "flush", flush)
+    assert ckpt.path_for(out / "runs" / "mu0.9.h5").is_file()
+    assert not (out / "summary.json").exists()
+    assert not (out / "runs" / "rate-state.h5").exists()
+    finished = [out / "runs" / f"{m}.h5" for m in ("mu0.1", "mu0.5")]
+    stamps = [p.stat().st_mtime_ns for p in finished]
+    capsys.readouterr()
+    assert main(argv) == 2  # the folder holds a paper run: --resume or --overwrite
+    assert "pass --resume" in one_line(capsys.readouterr().err)
+
+    drawn, ran = [], []
+    monkeypatch.setattr(single_interface, "run", lambda *a, **k: drawn.append(a))
+    simulate = Simulation.run
+
+    def run(self, *args, **kwargs):
+        ran.append((self.scenes[0].friction.label, kwargs.get("resume")))
+        return simulate(self, *args, **kwargs)
+
+    monkeypatch.setattr(Simulation, "run", run)
+    assert main([*argv, "--resume"]) == 0
+    assert drawn == []
+    assert ran == [("mu0.9", True), ("rate-state", False)]
+    assert [p.stat().st_mtime_ns for p in finished] == stamps
+    assert read_run(out / "runs" / "mu0.9.h5")["attrs"]["resumed"] == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["models"]) == ["mu0.1", "mu0.5", "mu0.9", "rate-state"]
+    for entry in summary["models"].values():
+        assert entry["single"]["status"] == "complete"
+        assert entry["single"]["steps"] == round(0.1 / entry["single"]["dt"])
+        assert entry["spread"]["peak_force"]["n"] == 2
+    assert (out / "figures" / "fig3_single_interface.png").is_file()

@@ -303,28 +303,16 @@ class ContactStage(Stage):
         ti.atomic_add(d.body_torque_q[i], ti.cast(torque * q, ti.i64))
 
     @ti.func
-    def pair(self, i, j, p, n_p, old, n_old, used, dt):
+    def pair(self, i, j, p, n_p, xi, elastic, theta, crushed, used, dt):
         """Contact between owner i, whose outline relative to its centroid is ``p``, and
-        partner j; ``old`` holds the owner's memory of the last step (``remember``, ``n_old``
-        contacts). Returns the owner's new slot count."""
+        partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``theta``,
+        ``crushed``: zero and ``NO_INTERFACE`` if it was not in contact). Returns the owner's
+        new slot count."""
         m, d = ti.static((self.model, self.data))
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
         q, n_q = self.outline(j, xi_)
         area, point, normal, width, _kind = overlap_ti(p, n_p, q, n_q)
         if area > 0.0:
-            # Memory of this pair from the last step, if it was in contact then.
-            xi = 0.0
-            elastic = 0.0
-            crushed = 0.0
-            theta = NO_INTERFACE
-            for s in range(n_old):
-                if old.partner[s] == j:
-                    xi = old.xi[s]
-                    elastic = old.elastic[s]
-                    if ti.static(self.layout.crushing):
-                        crushed = old.crushed[s]
-                    if ti.static(self.layout.rate_state):
-                        theta = old.theta[s]
             # point is relative to body i
             r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)
             v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
@@ -495,7 +483,21 @@ class ContactStage(Stage):
         # The owner's outline once for all its candidates.
         p, n_p = self.outline(i, d.body_pos[i])
         for k in range(ti.min(n, self.n_cand)):
-            used = self.pair(i, cand[k], p, n_p, old, n_old, used, dt)
+            # The pair's memory from the last step, if it was in contact then.
+            j = cand[k]
+            xi = ti.cast(0.0, self.layout.real)
+            elastic = ti.cast(0.0, self.layout.real)
+            theta = ti.cast(NO_INTERFACE, self.layout.real)
+            crushed = ti.cast(0.0, self.layout.real)
+            for s in range(n_old):
+                if old.partner[s] == j:
+                    xi = old.xi[s]
+                    elastic = old.elastic[s]
+                    if ti.static(self.layout.rate_state):
+                        theta = old.theta[s]
+                    if ti.static(self.layout.crushing):
+                        crushed = old.crushed[s]
+            used = self.pair(i, j, p, n_p, xi, elastic, theta, crushed, used, dt)
         d.contact_count[i] = ti.min(used, self.layout.slots)
         # More contacts than slots, or more near neighbours than the candidate list holds,
         # is reported (never silently dropped): the caller turns it into CapacityError.

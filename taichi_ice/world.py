@@ -63,7 +63,7 @@ class World:
         slots: contact slots per body; default sized from the scenes.
         force_dt: accept a dt above the stability limit.
         stepping: "worlds" (one thread per world, many steps per launch: small worlds),
-            "bodies" (parallel over bodies, three launches per step: large worlds) or
+            "bodies" (parallel over bodies, two launches per step: large worlds) or
             "auto" (worlds if no world has more than ``PER_WORLD_MAX_BODIES`` bodies, and on
             a GPU only for ``GPU_MIN_WORLDS`` worlds or more).
     """

@@ -1,7 +1,7 @@
 """Many steps per kernel launch: each thread steps one world, body by body.
 
 A scene of tens of blocks does less work per step than a kernel launch costs: stepping it
-with ``World.step`` (three launches and a dozen offloaded tasks per step) spends most of its
+with ``World.step`` (two launches and a dozen offloaded tasks per step) spends most of its
 time starting threads. ``WorldStepper.run(n)`` instead launches once for ``n`` steps;
 its one parallel loop runs over the worlds of the batch, and the thread of a world takes it
 through the ``n`` steps in turn:

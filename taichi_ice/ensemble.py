@@ -32,6 +32,7 @@ The metrics of one run (``run_metrics``), all from its ``/series``:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -458,19 +459,17 @@ def ensemble_command(
                     flush=True,
                 )
 
-            def run(law=law, paths=paths, **kw):
-                return run_ensemble(
-                    scene,
-                    seeds,
-                    law,
-                    until=until,
-                    out=paths,
-                    arch=arch,
-                    precision=precision,
-                    progress=progress,
-                    **kw,
-                )
-
+            run = functools.partial(
+                run_ensemble,
+                scene,
+                seeds,
+                law,
+                until=until,
+                out=paths,
+                arch=arch,
+                precision=precision,
+                progress=progress,
+            )
             ens = run_part(ledger, label, paths, run, label=label, seeds=seeds)
             results[label] = ens
             summary = ens.summary()

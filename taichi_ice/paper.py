@@ -26,6 +26,7 @@ Writes into DIR:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import sys
@@ -262,19 +263,17 @@ def _reproduce(
             + (": finished earlier, read back" if finished else ""),
         )
 
-        def run(batch_scene=batch_scene, law=law, batch_seeds=batch_seeds, paths=paths, **kw):
-            return run_ensemble(
-                batch_scene,
-                batch_seeds,
-                law,
-                until=until,
-                out=paths,
-                arch=arch,
-                precision=precision,
-                progress=progress,
-                **kw,
-            )
-
+        run = functools.partial(
+            run_ensemble,
+            batch_scene,
+            batch_seeds,
+            law,
+            until=until,
+            out=paths,
+            arch=arch,
+            precision=precision,
+            progress=progress,
+        )
         ens = run_part(ledger, label, paths, run, label=law.label, seeds=batch_seeds)
         results[label] = ens
         m = ens.metrics[0]

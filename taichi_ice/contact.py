@@ -303,7 +303,7 @@ class ContactStage(Stage):
         ti.atomic_add(d.body_torque_q[i], ti.cast(torque * q, ti.i64))
 
     @ti.func
-    def pair(self, i, j, p, n_p, xi, elastic, theta, crushed, used, dt):
+    def pair(self, i, j, p: ti.template(), n_p, xi, elastic, theta, crushed, used, dt):
         """Contact between owner i, whose outline relative to its centroid is ``p``, and
         partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``theta``,
         ``crushed``: zero and ``NO_INTERFACE`` if it was not in contact). Returns the owner's
@@ -473,7 +473,7 @@ class ContactStage(Stage):
         return old, n_old
 
     @ti.func
-    def body(self, i, cand, n, dt):
+    def body(self, i, cand: ti.template(), n, dt):
         """Every contact of owner i with its candidate partners ``cand[:n]`` (ascending ids,
         so the sums of a body do not depend on how the candidates were found); the memory of
         the last step is read from its slots and this step's written over it."""

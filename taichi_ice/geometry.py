@@ -395,7 +395,7 @@ def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
 
 
 @ti.func
-def _row(m, k):
+def _row(m: ti.template(), k):
     """Row ``k`` (a dynamic index) of a local ``(n, 2)`` matrix as a 2-vector."""
     return ti.math.vec2(m[k, 0], m[k, 1])
 
@@ -407,7 +407,7 @@ def _cross_ti(a, b):
 
 
 @ti.func
-def min_penetration_axis_ti(p, n_p, q, n_q):
+def min_penetration_axis_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     """Taichi twin of :func:`min_penetration_axis`.
 
     Args:
@@ -452,7 +452,7 @@ def _after(k, n):
 
 
 @ti.func
-def _edge_penetration_ti(own, n_own, other, n_other, k):
+def _edge_penetration_ti(own: ti.template(), n_own, other: ti.template(), n_other, k):
     """How far ``other`` reaches past edge ``k`` of ``own`` along its outward unit normal
     (m; <= 0: that edge's line separates them), and the normal."""
     a = _row(own, k)
@@ -465,7 +465,7 @@ def _edge_penetration_ti(own, n_own, other, n_other, k):
 
 
 @ti.func
-def sat_separated_ti(p, n_p, q, n_q):
+def sat_separated_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     """Taichi twin of :func:`sat_separated`: True (1) when an edge line separates p and q.
 
     Same arguments as :func:`min_penetration_axis_ti`; use it to reject a candidate pair
@@ -476,7 +476,7 @@ def sat_separated_ti(p, n_p, q, n_q):
 
 
 @ti.func
-def _clip_ti(p, n_p, q, n_q):
+def _clip_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     """Sutherland-Hodgman clipping of ``p`` by ``q`` (see :func:`intersection_polygon`).
 
     Returns:
@@ -529,7 +529,7 @@ def _clip_ti(p, n_p, q, n_q):
 
 
 @ti.func
-def overlap_ti(p, n_p, q, n_q):
+def overlap_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     """Taichi twin of :func:`overlap`: contact geometry of two convex polygons.
 
     The contact kernel gathers the world-coordinate vertices of bodies i and j into local

@@ -585,16 +585,18 @@ def overlap_ti(p: ti.template(), n_p, q: ti.template(), n_q):
                     cd = _row(q, _after(j, n_q)) - c
                     sa = _cross_ti(cd, a - c)
                     sb = _cross_ti(cd, a + ab - c)
-                    tc = _cross_ti(ab, c - a)
-                    td = _cross_ti(ab, c + cd - a)
-                    if ((sa > 0.0) != (sb > 0.0)) and ((tc > 0.0) != (td > 0.0)):
-                        x = a + (sa / (sa - sb)) * ab
-                        if sb > 0.0:
-                            entering_count += 1
-                            enter = x
-                        else:
-                            leave = x
-                        crossings += 1
+                    # Most edge pairs do not straddle each other's lines: test one first.
+                    if (sa > 0.0) != (sb > 0.0):
+                        tc = _cross_ti(ab, c - a)
+                        td = _cross_ti(ab, c + cd - a)
+                        if (tc > 0.0) != (td > 0.0):
+                            x = a + (sa / (sa - sb)) * ab
+                            if sb > 0.0:
+                                entering_count += 1
+                                enter = x
+                            else:
+                                leave = x
+                            crossings += 1
             chord = enter - leave
             chord_length = chord.norm()
             if crossings == 2 and entering_count == 1 and chord_length > 0.0:

@@ -32,7 +32,8 @@ import numpy as np
 from . import provenance
 from .errors import RunFileError
 
-FORMAT_VERSION = "2"  # 2: contact memory single-buffered (no buffer axis, no contact_area)
+FORMAT_VERSION = "3"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+#                       3: a status word per world
 SUFFIX = ".ckpt"
 
 

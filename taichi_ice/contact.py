@@ -505,7 +505,7 @@ class ContactStage(Stage):
         if n > self.n_cand:
             need = ti.max(need, n)
         if need > self.layout.slots:
-            ti.atomic_max(d.status[Status.SLOT_OVERFLOW], need)
+            ti.atomic_max(d.status[self.model.body_world[i], Status.SLOT_OVERFLOW], need)
 
     @ti.func
     def list_add(self, i, j, n):
@@ -533,7 +533,7 @@ class ContactStage(Stage):
         nb.nbr_ref_pos[i] = d.body_pos[i]
         nb.nbr_ref_angle[i] = d.body_angle[i]
         if n > self.layout.nbr_len:
-            ti.atomic_max(d.status[Status.LIST_OVERFLOW], n)
+            ti.atomic_max(d.status[self.model.body_world[i], Status.LIST_OVERFLOW], n)
 
     @ti.func
     def build_list(self, i):

@@ -172,9 +172,9 @@ class Integrator(Stage):
             self.moving(i)
             speed2 = v1.norm_sqr()
             if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
-                d.status[Status.NONFINITE] = 1
+                d.status[m.body_world[i], Status.NONFINITE] = 1
             elif speed2 > self.runaway_speed * self.runaway_speed:
-                d.status[Status.RUNAWAY] = 1
+                d.status[m.body_world[i], Status.RUNAWAY] = 1
         elif kind == BodyKind.KINEMATIC:
             # The contact force f acts on the pusher; the pusher does -f.v on the rest.
             v, w = d.body_vel[i], d.body_omega[i]

@@ -207,7 +207,7 @@ DATA: tuple[Var, ...] = (
     Var("contact_crushed", "real", ("n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
     Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic"),
     Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
-    Var("status", "i32", ("status_len",), "code", "overflow and divergence flags, codes.Status entries", role="cold"),
+    Var("status", "i32", ("n_worlds", "status_len"), "code", "overflow and divergence flags of each world, codes.Status entries", role="cold"),
     Var("time_step", "real", (), "s", "dt of the run", role="cold"),
 )
 

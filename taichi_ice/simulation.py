@@ -24,6 +24,7 @@ import numpy as np
 
 from . import backend, budget, checkpoint
 from . import io as runio
+from .energy import CONTACTS_COLUMN, STATUS_COLUMN
 from .errors import DivergenceError, Interrupted, StabilityError, TaichiIceError, UsageError
 from .io import RunWriter
 
@@ -195,8 +196,12 @@ class Simulation:
 
     def check(self) -> None:
         """Raise CapacityError or DivergenceError if the last steps overflowed or diverged."""
+        self._check_status(self.world.data.status.to_numpy()[: len(self.scenes)], self.time)
+
+    def _check_status(self, status: np.ndarray, time: float) -> None:
+        """``check`` on the ``(W, len(Status))`` status words read at ``time``."""
         try:
-            self.world.check()
+            self.world.raise_for(status, time)
         except DivergenceError as exc:
             if self.dt <= self.world.stable_dt:
                 raise
@@ -332,24 +337,29 @@ class Simulation:
         try:
             with stop.deferring():
                 if not resume:
-                    self._sample(series, writers, sample_dt=self.series_every * self.dt)
+                    rows, impulses = self.world.advance_sampled([(0, 1)])
+                    self._sample(series, writers, rows[0], impulses[0], self.world.steps, 0)
                     self._frame(writers)
                 k = self.world.steps
                 while k < n_end:
-                    # Step to the next sample, frame or the end in one go (World.advance: one
-                    # launch for all of them when the worlds are stepped a thread each).
-                    stride = min(
-                        self.series_every - k % self.series_every,
-                        self.frame_every - k % self.frame_every,
-                        n_end - k,
-                    )
-                    self.world.advance(stride)
-                    k += stride
-                    if k % self.series_every == 0 or k == n_end:
-                        self.check()
-                        steps_since = k % self.series_every or self.series_every
-                        self._sample(series, writers, sample_dt=steps_since * self.dt)
-                        bar.update(k)
+                    # Step to the next frame or the end in one go, sampling on the way
+                    # (World.advance_sampled: one launch for all of it when the worlds are
+                    # stepped a thread each); then the samples in order, each checked.
+                    stride = min(self.frame_every - k % self.frame_every, n_end - k)
+                    plan, ends = [], []
+                    while sum(p[0] for p in plan) < stride:
+                        at = k + sum(p[0] for p in plan)
+                        n = min(self.series_every - at % self.series_every, k + stride - at)
+                        ends.append(at + n)
+                        plan.append((n, int((at + n) % self.series_every == 0 or at + n == n_end)))
+                    rows, impulses = self.world.advance_sampled(plan)
+                    for s, ((_n, record), end) in enumerate(zip(plan, ends)):
+                        self._check_status(rows[s, :, STATUS_COLUMN:], end * self.dt)
+                        if record:
+                            since = end % self.series_every or self.series_every
+                            self._sample(series, writers, rows[s], impulses[s], end, since)
+                    k = ends[-1]
+                    bar.update(k)
                     if k % self.frame_every == 0:
                         self._frame(writers)
                         for w in writers:
@@ -428,24 +438,27 @@ class Simulation:
             failure=failure,
         )
 
-    def _sample(self, series, writers, sample_dt: float) -> None:
-        energies = self.world.energies()
-        impulses = self.world.take_probe_impulses()
-        contacts = self.world.contact_counts()
-        t = self.world.time
+    def _sample(self, series, writers, rows, impulses, steps: int, since: int) -> None:
+        """Record one sample of every world, taken after ``steps`` steps: ``rows`` ``(W,
+        SAMPLE_COLUMNS)`` and the probes' ``impulses`` ``(P, 2)`` over the ``since`` steps
+        since the last sample (``World.advance_sampled``); the probe force is their mean."""
+        t = steps * self.dt
+        energies = rows[:, :CONTACTS_COLUMN]
         for w, (s, probes) in enumerate(zip(series, self.world.probe_slices())):
-            force = impulses[probes] / sample_dt if self.world.steps else impulses[probes] * 0
-            row = (t, force, int(contacts[w]), *energies[w])
+            force = impulses[probes] / (since * self.dt) if since else impulses[probes] * 0
+            contacts = int(rows[w, CONTACTS_COLUMN])
+            row = (t, force, contacts, *energies[w])
             for key, value in zip(s, row):
                 s[key].append(value)
             if writers:
-                writers[w].add_sample(t, force, energies[w], int(contacts[w]))
-        self._check_budget(energies)
+                writers[w].add_sample(t, force, energies[w], contacts)
+        self._check_budget(energies, t)
 
-    def _check_budget(self, energies: np.ndarray) -> None:
+    def _check_budget(self, energies: np.ndarray, time: float | None = None) -> None:
         """Raise DivergenceError if a world's kinetic energy and what it dissipated far
         exceed what came in (``budget.breached``): an explicit integration past its limit
-        creates energy from nothing."""
+        creates energy from nothing. ``time``: when the energies were taken (default now)."""
+        time = self.world.time if time is None else time
         bad = budget.breached(energies, self.initial_energy)
         if bad.size:
             w = int(bad[0])
@@ -455,7 +468,7 @@ class Simulation:
                 f"world {w} created {float(budget.created(now, start)):.4g} J of energy from "
                 f"{float(budget.came_in(now, start)):.4g} J in (its kinetic energy and what it "
                 f"dissipated exceed what came in by over {100 * budget.BREACH:g} %) at t = "
-                f"{self.world.time:.4g} s; the run diverged{self._truth()}"
+                f"{time:.4g} s; the run diverged{self._truth()}"
             )
 
     def _truth(self) -> str:

@@ -23,8 +23,10 @@ from typing import ClassVar
 
 import taichi as ti
 
+from . import backend
 from .broadphase import NeighbourList
 from .contact import ContactStage
+from .energy import EnergyMeter
 from .integrate import Integrator
 from .schema import Access, Layout, Stage
 from .state import Data, Model
@@ -112,7 +114,17 @@ class WorldStepper(Stage):
             per_contact=ContactStage.ACCESS["compute"].per_contact,
         )
     }
-    PARTS: ClassVar[dict[str, type]] = {"contacts": ContactStage, "integrator": Integrator}
+    # The same steps, with the samples between them (EnergyMeter.take).
+    ACCESS["run_sampled"] = Access(
+        reads=tuple(sorted({*ACCESS["run"].reads, *EnergyMeter.ACCESS["take"].reads})),
+        writes=tuple(sorted({*ACCESS["run"].writes, *EnergyMeter.ACCESS["take"].writes})),
+        per_contact=ACCESS["run"].per_contact,
+    )
+    PARTS: ClassVar[dict[str, type]] = {
+        "contacts": ContactStage,
+        "integrator": Integrator,
+        "energy": EnergyMeter,
+    }
 
     def __init__(
         self,
@@ -122,23 +134,50 @@ class WorldStepper(Stage):
         neighbours: NeighbourList,
         contacts: ContactStage,
         integrator: Integrator,
+        energy: EnergyMeter,
     ):
         self.layout, self.model, self.data = layout, model, data
         self.neighbours, self.contacts, self.integrator = neighbours, contacts, integrator
+        self.energy = energy
+        # Worlds per task (CPU) or per block (GPU): a world's steps are long, so on the CPU
+        # each world is a task of the thread pool, which balances worlds of unequal cost.
+        self.world_block = 1 if backend.actual_arch() in (None, "cpu") else 128
+
+    @ti.func
+    def steps(self, w, n, dt):
+        """``n`` steps of world w."""
+        m, nb = ti.static((self.model, self.neighbours))
+        lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
+        for _s in range(n):
+            if nb.world_nbr_stale[w]:
+                for i in range(lo, hi):
+                    self.contacts.build_list(i)
+                nb.world_nbr_stale[w] = 0
+            for i in range(lo, hi):
+                self.contacts.listed(i, dt)
+            for i in range(lo, hi):
+                self.integrator.body(i, dt)  # marks the lists stale
 
     @ti.kernel
     def run(self, n: ti.i32):
         """``n`` steps of every world."""
-        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        ti.loop_config(block_dim=self.world_block)
         for w in range(self.layout.n_worlds):
-            dt = d.time_step[None]
-            lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
-            for _s in range(n):
-                if nb.world_nbr_stale[w]:
-                    for i in range(lo, hi):
-                        self.contacts.build_list(i)
-                    nb.world_nbr_stale[w] = 0
-                for i in range(lo, hi):
-                    self.contacts.listed(i, dt)
-                for i in range(lo, hi):
-                    self.integrator.body(i, dt)  # marks the lists stale
+            self.steps(w, n, self.data.time_step[None])
+
+    @ti.kernel
+    def run_sampled(
+        self,
+        plan: ti.types.ndarray(dtype=ti.i32, ndim=2),
+        rows: ti.types.ndarray(dtype=ti.f64, ndim=3),
+        impulses: ti.types.ndarray(dtype=ti.f64, ndim=3),
+    ):
+        """Steps and samples in one launch: for each row s of ``plan`` (steps, record), its
+        steps of every world and then the world's sample ``s`` (``EnergyMeter.sample``): the
+        host reads the whole run between two frames at once."""
+        ti.loop_config(block_dim=self.world_block)
+        for w in range(self.layout.n_worlds):
+            dt = self.data.time_step[None]
+            for s in range(plan.shape[0]):
+                self.steps(w, plan[s, 0], dt)
+                self.energy.sample(w, s, rows, impulses, plan[s, 1])

@@ -27,7 +27,7 @@ from .assemble import LIST_SLOTS, assemble
 from .broadphase import NeighbourList, SpatialHash
 from .codes import Status
 from .contact import ContactStage
-from .energy import EnergyMeter
+from .energy import SAMPLE_COLUMNS, EnergyMeter
 from .errors import CapacityError, DivergenceError, UsageError
 from .integrate import Integrator
 from .stepper import WorldStepper
@@ -105,7 +105,13 @@ class World:
         self.integrator.orient()
         self.energy = EnergyMeter(self.layout, self.model, self.data)
         self.stepper = WorldStepper(
-            self.layout, self.model, self.data, self.neighbours, self.contacts, self.integrator
+            self.layout,
+            self.model,
+            self.data,
+            self.neighbours,
+            self.contacts,
+            self.integrator,
+            self.energy,
         )
         self.steps = 0
         self.time = 0.0
@@ -206,34 +212,81 @@ class World:
             self.contacts.build_lists()
 
     def check(self) -> None:
-        """Raise if a step overflowed the contact slots or diverged (reads back the status word)."""
-        status = self.data.status.to_numpy()
-        if status[Status.SLOT_OVERFLOW] > self.layout.slots:
+        """Raise if a step overflowed the contact slots or diverged (reads back the status
+        words)."""
+        self.raise_for(self.data.status.to_numpy()[: len(self.scenes)], self.time)
+
+    def raise_for(self, status: np.ndarray, time: float) -> None:
+        """Raise CapacityError or DivergenceError for ``(W, len(Status))`` status words (one
+        per world, as ``check`` reads them or a sample holds them) read at ``time`` (s)."""
+        status = np.asarray(status).astype(np.int64).reshape(-1, len(Status))
+        where = ""
+        bad = np.flatnonzero(
+            (status[:, Status.SLOT_OVERFLOW] > self.layout.slots)
+            | (status[:, Status.LIST_OVERFLOW] > self.layout.nbr_len)
+            | (status[:, Status.NONFINITE] != 0)
+            | (status[:, Status.RUNAWAY] != 0)
+        )
+        if not bad.size:
+            return
+        w = int(bad[0])
+        if len(status) > 1:
+            where = f" in world {w}"
+        word = status[w]
+        if word[Status.SLOT_OVERFLOW] > self.layout.slots:
             raise CapacityError(
-                f"a body had {status[Status.SLOT_OVERFLOW]} contacts at t = {self.time:.4g} s, "
+                f"a body had {word[Status.SLOT_OVERFLOW]} contacts{where} at t = {time:.4g} s, "
                 f"more than its {self.layout.slots} contact slots; pass slots="
-                f"{int(status[Status.SLOT_OVERFLOW]) + 4} (Simulation/World) to allow more"
+                f"{int(word[Status.SLOT_OVERFLOW]) + 4} (Simulation/World) to allow more"
             )
-        listed = int(status[Status.LIST_OVERFLOW])
+        listed = int(word[Status.LIST_OVERFLOW])
         if listed > self.layout.nbr_len:
             raise CapacityError(
-                f"a body had {listed} neighbours within the skin at t = {self.time:.4g} s, "
+                f"a body had {listed} neighbours within the skin{where} at t = {time:.4g} s, "
                 f"more than its list of {self.layout.nbr_len}; pass slots="
                 f"{-(-listed // LIST_SLOTS) + 2} (Simulation/World) to allow more"
             )
-        if status[Status.NONFINITE]:
+        if word[Status.NONFINITE]:
             raise DivergenceError(
-                f"a body's velocity became non-finite at t = {self.time:.4g} s "
+                f"a body's velocity became non-finite{where} at t = {time:.4g} s "
                 f"(dt = {self.dt:.3g} s, stability limit {self.stable_dt:.3g} s); the run "
                 "diverged: lower dt (or the scene's dt_safety)"
             )
-        if status[Status.RUNAWAY]:
-            raise DivergenceError(
-                f"a body moved faster than {self.integrator.runaway_speed:.3g} m/s (a quarter "
-                f"of the thinnest block per step) at t = {self.time:.4g} s (dt = {self.dt:.3g} s, "
-                f"stability limit {self.stable_dt:.3g} s); the run diverged: lower dt (or the "
-                "scene's dt_safety)"
-            )
+        raise DivergenceError(
+            f"a body moved faster than {self.integrator.runaway_speed:.3g} m/s (a quarter "
+            f"of the thinnest block per step){where} at t = {time:.4g} s (dt = {self.dt:.3g} "
+            f"s, stability limit {self.stable_dt:.3g} s); the run diverged: lower dt (or the "
+            "scene's dt_safety)"
+        )
+
+    def advance_sampled(self, plan) -> tuple[np.ndarray, np.ndarray]:
+        """Advance through ``plan``, rows ``(steps, record)``: that many steps, then a sample
+        of every world (``EnergyMeter.sample``); ``record`` restarts the probes' impulses
+        from zero (a sample of the series), else they go on adding up. Stepping a thread per
+        world, the whole plan is one launch. No status is checked: the samples hold it
+        (``raise_for``).
+
+        Returns:
+            ``rows`` ``(S, W, energy.SAMPLE_COLUMNS)``: each world's energy table
+            (``codes.EnergyTerm`` columns), contact count and status word after each row of
+            the plan; ``impulses`` ``(S, P, 2)``: each probe's contact impulse (N s) since
+            the last recorded sample.
+        """
+        plan = np.ascontiguousarray(np.asarray(plan, dtype=np.int32).reshape(-1, 2))
+        if np.any(plan[:, 0] < 0):
+            raise ValueError(f"advance_sampled: negative step counts in {plan[:, 0]}")
+        rows = np.zeros((len(plan), self.layout.n_worlds, SAMPLE_COLUMNS))
+        impulses = np.zeros((len(plan), max(self.layout.n_probes, 1), 2))
+        if len(plan):
+            if self.stepping == "worlds":
+                self.stepper.run_sampled(plan, rows, impulses)
+                self.steps += int(plan[:, 0].sum())
+                self.time = self.steps * self.dt
+            else:
+                for s, (n, record) in enumerate(plan):
+                    self.advance(int(n))
+                    self.energy.take(rows, impulses, s, int(record))
+        return rows[:, : len(self.scenes)], impulses[:, : self.layout.n_probes]
 
     def place(self, positions: np.ndarray, angles: np.ndarray) -> None:
         """Move every body to ``(N, 2)`` positions (m) and ``(N,)`` angles (rad): their

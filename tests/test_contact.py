@@ -320,7 +320,7 @@ def test_spatial_hash_finds_exactly_the_overlapping_pairs(f64):
     world.place(pos, ang)
     world.refresh_lists()
     world.contacts.compute()
-    assert world.data.status.to_numpy()[Status.SLOT_OVERFLOW] <= world.layout.slots
+    assert world.data.status.to_numpy()[:, Status.SLOT_OVERFLOW].max() <= world.layout.slots
     state = ReferenceState(pos=pos, angle=ang, vel=world.velocities(), omega=world.omegas())
     outlines = [outline(model, state, i) for i in range(n)]
     found = {frozenset(k) for k in kernel_contacts(world)}

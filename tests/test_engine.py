@@ -21,6 +21,8 @@ import pytest
 
 from taichi_ice import DivergenceError, Simulation, StabilityError, load_scenario
 from taichi_ice.budget import residual as energy_residual
+from taichi_ice.codes import Status
+from taichi_ice.energy import CONTACTS_COLUMN, STATUS_COLUMN
 from taichi_ice.errors import CapacityError
 from taichi_ice.friction import RateState
 from taichi_ice.geometry import diamond, rectangle, sat_separated, transform
@@ -600,6 +602,64 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law):
         (by_bodies.contact_counts(), by_worlds.contact_counts()),
     ):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize(
+    ("name", "plan"),
+    [
+        ("cluster", [(0, 1), (150, 1), (100, 0), (150, 1)]),  # blocks thrown together
+        ("sliding_block", [(0, 1), (400, 1), (250, 0), (350, 1)]),  # on its probe, the floor
+    ],
+)
+def test_sampled_advance_equals_stepping_and_reading_back(f64, name, plan):
+    """``advance_sampled`` (the run's stepping: steps and samples in one launch when worlds
+    are stepped a thread each) gives, bit for bit, what stepping and reading the energies,
+    contact counts and probe impulses back between launches gives, in both steppings; an
+    unrecorded row leaves the probes' impulses adding up to the next recorded one."""
+    if name == "cluster":
+        scenes = [scene_from_dict(cluster_scene_dict(seed, 3 + seed)) for seed in range(2)]
+    else:
+        base = load_scenario(name)
+        scenes = [base.reseeded(base.simulation.seed + k) for k in range(2)]
+    got = {}
+    for stepping in ("worlds", "bodies"):
+        world = World(scenes, stepping=stepping)
+        got[stepping] = world.advance_sampled(plan)
+        assert world.steps == sum(n for n, _record in plan)
+    rows, impulses = got["worlds"]
+    np.testing.assert_array_equal(rows, got["bodies"][0])
+    np.testing.assert_array_equal(impulses, got["bodies"][1])
+
+    ref = World(scenes, stepping="worlds")
+    want_rows, want_impulses = [], []
+    for n, record in plan:
+        ref.advance(n)
+        counts = ref.contact_counts()
+        want_rows.append(np.column_stack([ref.energies(), counts, ref.data.status.to_numpy()]))
+        if record:
+            want_impulses.append(ref.take_probe_impulses())
+    np.testing.assert_array_equal(rows, np.stack(want_rows))
+    recorded = [s for s, (_n, record) in enumerate(plan) if record]
+    np.testing.assert_array_equal(impulses[recorded], np.stack(want_impulses))
+    # Every world made contacts, and a probe was pushed on in each recorded interval.
+    assert rows[:, :, CONTACTS_COLUMN].max(axis=0).min() > 0
+    if ref.layout.n_probes:
+        assert np.all(np.abs(impulses[recorded[1:]]).max(axis=(1, 2)) > 0)
+    assert not rows[:, :, STATUS_COLUMN:].any()
+
+
+def test_status_names_the_world_that_failed(f64):
+    """Each world has its own status word: a failure is reported with its world and time."""
+    scenes = [scene_from_dict(cluster_scene_dict(seed, 3)) for seed in range(2)]
+    world = World(scenes)
+    status = np.zeros((2, len(Status)), dtype=np.int64)
+    world.raise_for(status, 1.0)  # all clear
+    status[1, Status.NONFINITE] = 1
+    with pytest.raises(DivergenceError, match=r"non-finite in world 1 at t = 1\.5 s"):
+        world.raise_for(status, 1.5)
+    status[0, Status.SLOT_OVERFLOW] = world.layout.slots + 2
+    with pytest.raises(CapacityError, match=r"in world 0 at t = 2 s.*slots="):
+        world.raise_for(status, 2.0)
 
 
 @pytest.mark.parametrize("stepping", ["worlds", "bodies"])

@@ -152,6 +152,14 @@ def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> 
             default_ip=ti.i32,
             log_level=ti.WARN,
             offline_cache=True,
+            # On the CPU Taichi otherwise cuts an outermost loop into one chunk per thread of
+            # at least 512 iterations, ignoring loop_config: a batch of 17 worlds, stepped a
+            # thread each, ran on one core (measured: 2 worlds took twice as long as 1). Off,
+            # a loop is cut into tasks of its block_dim (adaptive when not set: 512-1024
+            # iterations), and the world loops ask for a world per task. (Taichi's offline
+            # cache does not key kernels by this option: a kernel compiled with it on before
+            # keeps its old threading until its code changes. The stepper's changed with it.)
+            make_cpu_multithreading_loop=False,
         )
     _current = wanted
     _actual = _running_arch()

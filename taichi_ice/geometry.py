@@ -422,12 +422,36 @@ def min_penetration_axis_ti(p: ti.template(), n_p, q: ti.template(), n_q):
         penetration when overlapping, the gap along the first separating edge (``<= 0``)
         when separated; axis a unit 2-vector from ``p`` toward ``q``.
     """
+    normals = edge_normals_ti(p, n_p)
+    return _min_penetration_axis_ti(p, normals, n_p, q, n_q)
+
+
+@ti.func
+def edge_normals_ti(p: ti.template(), n_p):
+    """Outward unit normals of the edges of ``p`` (rows ``0 .. n_p - 1`` of a matrix shaped
+    like ``p``; edge k runs from vertex k to vertex k + 1), for :func:`overlap_normals_ti`:
+    a body's normals computed once serve all its candidate pairs."""
+    normals = ti.Matrix.zero(float, p.n, 2)
+    for k in range(n_p):
+        a = _row(p, k)
+        e = _row(p, _after(k, n_p)) - a
+        n = ti.math.vec2(e[1], -e[0]).normalized()
+        normals[k, 0] = n[0]
+        normals[k, 1] = n[1]
+    return normals
+
+
+@ti.func
+def _min_penetration_axis_ti(
+    p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), n_q
+):
+    """:func:`min_penetration_axis_ti` with the edge normals of ``p`` given."""
     # Stops at the first separating axis: most candidate pairs of a dense field are near
     # misses, and the depth of a separated pair only matters by its sign.
     depth = 0.0
     axis = ti.math.vec2(0.0, 0.0)
     for k in range(n_p):
-        d, n = _edge_penetration_ti(p, n_p, q, n_q, k)
+        d, n = _normal_penetration_ti(p, p_normals, k, q, n_q)
         if k == 0 or d < depth:
             depth, axis = d, n
         if depth <= 0.0:
@@ -458,6 +482,19 @@ def _edge_penetration_ti(own: ti.template(), n_own, other: ti.template(), n_othe
     a = _row(own, k)
     e = _row(own, _after(k, n_own)) - a
     n = ti.math.vec2(e[1], -e[0]).normalized()
+    lowest = ti.math.dot(n, _row(other, 0) - a)
+    for j in range(1, n_other):
+        lowest = ti.min(lowest, ti.math.dot(n, _row(other, j) - a))
+    return -lowest, n
+
+
+@ti.func
+def _normal_penetration_ti(
+    own: ti.template(), normals: ti.template(), k, other: ti.template(), n_other
+):
+    """:func:`_edge_penetration_ti` with the outward unit normals of ``own`` given."""
+    a = _row(own, k)
+    n = _row(normals, k)
     lowest = ti.math.dot(n, _row(other, 0) - a)
     for j in range(1, n_other):
         lowest = ti.min(lowest, ti.math.dot(n, _row(other, j) - a))
@@ -530,7 +567,16 @@ def _clip_ti(p: ti.template(), n_p, q: ti.template(), n_q):
 
 @ti.func
 def overlap_ti(p: ti.template(), n_p, q: ti.template(), n_q):
-    """Taichi twin of :func:`overlap`: contact geometry of two convex polygons.
+    """Taichi twin of :func:`overlap`: :func:`overlap_normals_ti` with the normals of ``p``
+    computed here."""
+    normals = edge_normals_ti(p, n_p)
+    return overlap_normals_ti(p, normals, n_p, q, n_q)
+
+
+@ti.func
+def overlap_normals_ti(p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), n_q):
+    """Contact geometry of two convex polygons (the Taichi twin of :func:`overlap`), the
+    outward unit normals of ``p``'s edges given (``edge_normals_ti``).
 
     The contact kernel gathers the world-coordinate vertices of bodies i and j into local
     matrices (e.g. ``ti.Matrix.zero(float, MAXV, 2)`` filled row by row) and calls this.
@@ -541,6 +587,7 @@ def overlap_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     Args:
         p: ``ti.Matrix`` of static shape ``(P, 2)``; rows ``0 .. n_p - 1`` are a
             counter-clockwise convex polygon (m).
+        p_normals: ``edge_normals_ti(p, n_p)``.
         n_p: number of vertices of ``p`` (3 <= n_p <= P).
         q: ``ti.Matrix`` of static shape ``(Q, 2)``, likewise (m).
         n_q: number of vertices of ``q`` (3 <= n_q <= Q).
@@ -556,7 +603,7 @@ def overlap_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     normal = ti.math.vec2(0.0, 0.0)
     width = 0.0
     kind = OverlapKind.NONE
-    depth, axis = min_penetration_axis_ti(p, n_p, q, n_q)
+    depth, axis = _min_penetration_axis_ti(p, p_normals, n_p, q, n_q)
     if depth > 0.0:
         buf, start, count = _clip_ti(p, n_p, q, n_q)
         # Fan from the first vertex, as _area_centroid does.

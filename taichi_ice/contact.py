@@ -47,7 +47,7 @@ import taichi as ti
 
 from .broadphase import bucket_of
 from .codes import BodyEnergy, BodyKind, Status
-from .geometry import overlap_ti
+from .geometry import edge_normals_ti, overlap_normals_ti
 from .schema import Access, Layout, Stage
 from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction_ti
 from .state import FORCE_QUANTUM, Data, Model
@@ -296,22 +296,47 @@ class ContactStage(Stage):
         return p, count
 
     @ti.func
-    def add_force(self, i, force, torque):
+    def add_force(self, i, force, torque, serial: ti.template()):
+        """Add a contact's force and torque to body i, in fixed point: atomically when
+        bodies are stepped in parallel, plainly when a thread steps the whole world
+        (``serial``); integer sums are the same in any order either way."""
         d, q = ti.static((self.data, 1.0 / FORCE_QUANTUM))
-        ti.atomic_add(d.body_force_q[i][0], ti.cast(force[0] * q, ti.i64))
-        ti.atomic_add(d.body_force_q[i][1], ti.cast(force[1] * q, ti.i64))
-        ti.atomic_add(d.body_torque_q[i], ti.cast(torque * q, ti.i64))
+        fx = ti.cast(force[0] * q, ti.i64)
+        fy = ti.cast(force[1] * q, ti.i64)
+        tq = ti.cast(torque * q, ti.i64)
+        if ti.static(serial):
+            d.body_force_q[i] = d.body_force_q[i] + ti.Vector([fx, fy], ti.i64)
+            d.body_torque_q[i] = d.body_torque_q[i] + tq
+        else:
+            ti.atomic_add(d.body_force_q[i][0], fx)
+            ti.atomic_add(d.body_force_q[i][1], fy)
+            ti.atomic_add(d.body_torque_q[i], tq)
 
     @ti.func
-    def pair(self, i, j, p: ti.template(), n_p, xi, elastic, theta, crushed, used, dt):
-        """Contact between owner i, whose outline relative to its centroid is ``p``, and
+    def pair(
+        self,
+        i,
+        j,
+        p: ti.template(),
+        p_normals: ti.template(),
+        n_p,
+        xi,
+        elastic,
+        theta,
+        crushed,
+        used,
+        dt,
+        serial: ti.template(),
+    ):
+        """Contact between owner i, whose outline relative to its centroid is ``p`` (its
+        edges' outward normals ``p_normals``), and
         partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``theta``,
         ``crushed``: zero and ``NO_INTERFACE`` if it was not in contact). Returns the owner's
         new slot count."""
         m, d = ti.static((self.model, self.data))
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
         q, n_q = self.outline(j, xi_)
-        area, point, normal, width, _kind = overlap_ti(p, n_p, q, n_q)
+        area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
         if area > 0.0:
             # point is relative to body i
             r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)
@@ -368,8 +393,8 @@ class ContactStage(Stage):
                 xi, slip, dt, k_t, c_t, mu * f_n
             )
             force = f_n * normal + f_t * tangent  # on j; -force on i
-            self.add_force(j, force, cross2(r_j, force))
-            self.add_force(i, -force, -cross2(r_i, force))
+            self.add_force(j, force, cross2(r_j, force), serial)
+            self.add_force(i, -force, -cross2(r_i, force), serial)
 
             # Elastic energy stored in the contact: the work of its elastic forces. Normal:
             # on the approach, less what crushed. (integral k_e A dA / L equals it only for
@@ -379,10 +404,15 @@ class ContactStage(Stage):
             # step's stiffness, which follows the width.
             elastic += f_el * approach * dt - crush_work
             elastic += 0.5 * k_t * (xi_new * xi_new - xi * xi)
-            d.body_energy[i, BodyEnergy.FRICTION] += slip_work
-            d.body_energy[i, BodyEnergy.VISCOUS] += (f_n - f_el) * approach * dt + damp_work
+            # The owner's rows: plain stores (an augmented assignment would be an atomic).
+            viscous = (f_n - f_el) * approach * dt + damp_work
+            d.body_energy[i, BodyEnergy.FRICTION] = (
+                d.body_energy[i, BodyEnergy.FRICTION] + slip_work
+            )
+            d.body_energy[i, BodyEnergy.VISCOUS] = d.body_energy[i, BodyEnergy.VISCOUS] + viscous
             if ti.static(self.layout.crushing):
-                d.body_energy[i, BodyEnergy.CRUSHING] += crush_work
+                e = d.body_energy[i, BodyEnergy.CRUSHING]
+                d.body_energy[i, BodyEnergy.CRUSHING] = e + crush_work
 
             if used < self.layout.slots:
                 d.contact_partner[i, used] = j
@@ -473,15 +503,16 @@ class ContactStage(Stage):
         return old, n_old
 
     @ti.func
-    def body(self, i, cand: ti.template(), n, dt):
+    def body(self, i, cand: ti.template(), n, dt, serial: ti.template()):
         """Every contact of owner i with its candidate partners ``cand[:n]`` (ascending ids,
         so the sums of a body do not depend on how the candidates were found); the memory of
         the last step is read from its slots and this step's written over it."""
         _m, d = ti.static((self.model, self.data))
         old, n_old = self.remember(i)
         used = 0
-        # The owner's outline once for all its candidates.
+        # The owner's outline and its edges' normals once for all its candidates.
         p, n_p = self.outline(i, d.body_pos[i])
+        p_normals = edge_normals_ti(p, n_p)
         for k in range(ti.min(n, self.n_cand)):
             # The pair's memory from the last step, if it was in contact then.
             j = cand[k]
@@ -497,7 +528,7 @@ class ContactStage(Stage):
                         theta = old.theta[s]
                     if ti.static(self.layout.crushing):
                         crushed = old.crushed[s]
-            used = self.pair(i, j, p, n_p, xi, elastic, theta, crushed, used, dt)
+            used = self.pair(i, j, p, p_normals, n_p, xi, elastic, theta, crushed, used, dt, serial)
         d.contact_count[i] = ti.min(used, self.layout.slots)
         # More contacts than slots, or more near neighbours than the candidate list holds,
         # is reported (never silently dropped): the caller turns it into CapacityError.
@@ -593,8 +624,9 @@ class ContactStage(Stage):
                 nb.nbr_rebuild[None] = 0
 
     @ti.func
-    def listed(self, i, dt):
-        """Body i's contacts, its candidates taken from its neighbour list."""
+    def listed(self, i, dt, serial: ti.template()):
+        """Body i's contacts, its candidates taken from its neighbour list; ``serial``: one
+        thread steps the whole world (``WorldStepper``), so forces need no atomics."""
         nb, _d = ti.static((self.neighbours, self.data))
         cand = ti.Vector.zero(ti.i32, self.n_cand)
         n = 0
@@ -604,11 +636,11 @@ class ContactStage(Stage):
                 if n < self.n_cand:
                     cand[n] = j
                 n += 1
-        self.body(i, cand, n, dt)
+        self.body(i, cand, n, dt, serial)
 
     @ti.kernel
     def compute(self):
         """Forces of every contact of the step in parallel over bodies, candidates from the
         neighbour lists, and the contacts' memory."""
         for i in range(self.layout.n_bodies):
-            self.listed(i, self.data.time_step[None])
+            self.listed(i, self.data.time_step[None], False)

@@ -138,7 +138,11 @@ class Integrator(Stage):
 
     @ti.func
     def body(self, i, dt):
-        """Advance body i by one step of dt."""
+        """Advance body i by one step of dt.
+
+        Only body i's thread writes its rows (state, energy, probe), so they are updated
+        with plain stores: an augmented assignment to a field is an atomic in Taichi (a
+        compare-and-swap loop for a float), which the step does not need."""
         m, d = ti.static((self.model, self.data))
         f = ti.cast(d.body_force_q[i], self.layout.real) * FORCE_QUANTUM
         tau = ti.cast(d.body_torque_q[i], self.layout.real) * FORCE_QUANTUM
@@ -146,7 +150,7 @@ class Integrator(Stage):
         d.body_torque_q[i] = 0
         p = m.body_probe[i]
         if p >= 0:
-            d.probe_impulse[p] += ti.cast(f * dt, ti.f64)
+            d.probe_impulse[p] = d.probe_impulse[p] + ti.cast(f * dt, ti.f64)
         kind = m.body_kind[i]
         if kind == BodyKind.DYNAMIC:
             v0, w0 = d.body_vel[i], d.body_omega[i]
@@ -160,14 +164,16 @@ class Integrator(Stage):
             v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
             w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
-            d.body_energy[i, BodyEnergy.DRAG] += ti.cast(
+            d.body_energy[i, BodyEnergy.DRAG] = d.body_energy[i, BodyEnergy.DRAG] + ti.cast(
                 -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
             )
-            d.body_energy[i, BodyEnergy.WORK] += ti.cast(f_ext.dot(vm) * dt, ti.f64)
+            d.body_energy[i, BodyEnergy.WORK] = d.body_energy[i, BodyEnergy.WORK] + ti.cast(
+                f_ext.dot(vm) * dt, ti.f64
+            )
             d.body_vel[i] = v1
             d.body_omega[i] = w1
-            d.body_pos[i] += ti.cast(dt * v1, ti.f64)
-            d.body_angle[i] += dt * w1
+            d.body_pos[i] = d.body_pos[i] + ti.cast(dt * v1, ti.f64)
+            d.body_angle[i] = d.body_angle[i] + dt * w1
             self.turn(i)
             self.moving(i)
             speed2 = v1.norm_sqr()
@@ -178,9 +184,11 @@ class Integrator(Stage):
         elif kind == BodyKind.KINEMATIC:
             # The contact force f acts on the pusher; the pusher does -f.v on the rest.
             v, w = d.body_vel[i], d.body_omega[i]
-            d.body_energy[i, BodyEnergy.WORK] += ti.cast(-(f.dot(v) + tau * w) * dt, ti.f64)
-            d.body_pos[i] += ti.cast(dt * v, ti.f64)
-            d.body_angle[i] += dt * w
+            d.body_energy[i, BodyEnergy.WORK] = d.body_energy[i, BodyEnergy.WORK] + ti.cast(
+                -(f.dot(v) + tau * w) * dt, ti.f64
+            )
+            d.body_pos[i] = d.body_pos[i] + ti.cast(dt * v, ti.f64)
+            d.body_angle[i] = d.body_angle[i] + dt * w
             if w != 0.0:
                 self.turn(i)
             self.moving(i)

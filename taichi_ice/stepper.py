@@ -154,7 +154,7 @@ class WorldStepper(Stage):
                     self.contacts.build_list(i)
                 nb.world_nbr_stale[w] = 0
             for i in range(lo, hi):
-                self.contacts.listed(i, dt)
+                self.contacts.listed(i, dt, True)
             for i in range(lo, hi):
                 self.integrator.body(i, dt)  # marks the lists stale
 

@@ -14,7 +14,7 @@ A sample of the time series (``sample``) is one row per world, ``SAMPLE_COLUMNS`
 energy table, the world's contact count and its status word, taken with the probes'
 impulses since the last sample in the same pass, so that a run's sample costs one kernel
 launch (``take``), or none when the worlds are stepped a thread each (the stepper samples
-between its steps, ``WorldStepper.run_sampled``).
+between its steps, ``WorldStepper.run``).
 """
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.

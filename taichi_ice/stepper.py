@@ -2,7 +2,8 @@
 
 A scene of tens of blocks does less work per step than a kernel launch costs: stepping it
 with ``World.step`` (two launches and a dozen offloaded tasks per step) spends most of its
-time starting threads. ``WorldStepper.run(n)`` instead launches once for ``n`` steps;
+time starting threads. ``WorldStepper.run(plan, ...)`` instead launches once for many steps
+(and the samples of the run between them, ``World.advance_sampled``);
 its one parallel loop runs over the worlds of the batch, and the thread of a world takes it
 through the ``n`` steps in turn:
 
@@ -30,6 +31,9 @@ from .energy import EnergyMeter
 from .integrate import Integrator
 from .schema import Access, Layout, Stage
 from .state import Data, Model
+
+# ``take`` of a plan row that takes no sample (``WorldStepper.run``).
+NO_SAMPLE = -1
 
 
 @ti.data_oriented
@@ -114,8 +118,9 @@ class WorldStepper(Stage):
             per_contact=ContactStage.ACCESS["compute"].per_contact,
         )
     }
-    # The same steps, with the samples between them (EnergyMeter.take).
-    ACCESS["run_sampled"] = Access(
+    # With the samples between the steps (EnergyMeter.take): a step that takes none reads
+    # none of their fields, but the kernel may.
+    ACCESS["run"] = Access(
         reads=tuple(sorted({*ACCESS["run"].reads, *EnergyMeter.ACCESS["take"].reads})),
         writes=tuple(sorted({*ACCESS["run"].writes, *EnergyMeter.ACCESS["take"].writes})),
         per_contact=ACCESS["run"].per_contact,
@@ -159,25 +164,21 @@ class WorldStepper(Stage):
                 self.integrator.body(i, dt)  # marks the lists stale
 
     @ti.kernel
-    def run(self, n: ti.i32):
-        """``n`` steps of every world."""
-        ti.loop_config(block_dim=self.world_block)
-        for w in range(self.layout.n_worlds):
-            self.steps(w, n, self.data.time_step[None])
-
-    @ti.kernel
-    def run_sampled(
+    def run(
         self,
         plan: ti.types.ndarray(dtype=ti.i32, ndim=2),
         rows: ti.types.ndarray(dtype=ti.f64, ndim=3),
         impulses: ti.types.ndarray(dtype=ti.f64, ndim=3),
     ):
-        """Steps and samples in one launch: for each row s of ``plan`` (steps, record), its
-        steps of every world and then the world's sample ``s`` (``EnergyMeter.sample``): the
-        host reads the whole run between two frames at once."""
+        """Steps and samples in one launch: for each row s of ``plan`` (steps, take), its
+        steps of every world, then the world's sample ``s`` (``EnergyMeter.sample``) unless
+        ``take`` is ``NO_SAMPLE``; ``take`` 1 restarts the probes' impulses (a recorded
+        sample), 0 lets them add up. One kernel for stepping with and without samples: a
+        layout compiles it once."""
         ti.loop_config(block_dim=self.world_block)
         for w in range(self.layout.n_worlds):
             dt = self.data.time_step[None]
             for s in range(plan.shape[0]):
                 self.steps(w, plan[s, 0], dt)
-                self.energy.sample(w, s, rows, impulses, plan[s, 1])
+                if plan[s, 1] != NO_SAMPLE:
+                    self.energy.sample(w, s, rows, impulses, plan[s, 1])

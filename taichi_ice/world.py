@@ -30,7 +30,7 @@ from .contact import ContactStage
 from .energy import SAMPLE_COLUMNS, EnergyMeter
 from .errors import CapacityError, DivergenceError, UsageError
 from .integrate import Integrator
-from .stepper import WorldStepper
+from .stepper import NO_SAMPLE, WorldStepper
 
 # The stages of a step, by the name their kernels are reported under (benchmarks, traffic).
 STAGES = {
@@ -113,6 +113,8 @@ class World:
             self.integrator,
             self.energy,
         )
+        # What WorldStepper.run is handed when it takes no sample (it writes nothing there).
+        self._no_samples = (np.zeros((1, 1, SAMPLE_COLUMNS)), np.zeros((1, 1, 2)))
         self.steps = 0
         self.time = 0.0
 
@@ -195,7 +197,8 @@ class World:
         if n <= 0:
             return
         if self.stepping == "worlds":
-            self.stepper.run(n)
+            plan = np.array([[n, NO_SAMPLE]], dtype=np.int32)
+            self.stepper.run(plan, *self._no_samples)
         else:
             for _ in range(n):
                 self.refresh_lists()
@@ -279,7 +282,7 @@ class World:
         impulses = np.zeros((len(plan), max(self.layout.n_probes, 1), 2))
         if len(plan):
             if self.stepping == "worlds":
-                self.stepper.run_sampled(plan, rows, impulses)
+                self.stepper.run(plan, rows, impulses)
                 self.steps += int(plan[:, 0].sum())
                 self.time = self.steps * self.dt
             else:

@@ -48,6 +48,18 @@ def test_xarray_opens_every_group_with_no_options_and_reads_the_hdf5_values(run_
             assert ds.sizes["time"] == f["series/time"].shape[0]
 
 
+def test_xarray_datatree_opens_every_group_of_the_file_at_once(run_file):
+    """``xr.open_datatree`` with no options: the root's provenance and every group, each
+    variable on its named dimensions."""
+    tree = xr.open_datatree(run_file)
+    assert set(GROUPS) <= set(tree.children)
+    assert tree.attrs["Conventions"].startswith("CF-")
+    assert tree["series"]["friction_energy"].dims == ("time",)
+    assert tree["frames"]["position"].dims == ("time", "body", "xy")
+    with h5py.File(run_file, "r") as f:
+        np.testing.assert_array_equal(tree["series"]["time"].values, f["series/time"][()])
+
+
 def test_the_netcdf_c_library_reads_units_and_long_names_of_every_variable(run_file):
     with netCDF4.Dataset(run_file) as nc:
         assert nc.data_model == "NETCDF4"

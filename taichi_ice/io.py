@@ -362,6 +362,7 @@ class RunWriter:
         self.frames: dict[str, list] = {
             k: [] for k in ("time", "position", "angle", "velocity", "omega")
         }
+        self._buffered = 0
         if resume is not None:
             self.n_samples, self.n_frames = resume
             with _open_for_write(self.path) as f:
@@ -472,10 +473,12 @@ class RunWriter:
         }
         for name, value in row.items():
             self.frames[name].append(np.array(value, dtype=np.float64))
+            self._buffered += self.frames[name][-1].nbytes
 
     @property
-    def pending(self) -> bool:
-        return bool(self.series["time"] or self.frames["time"])
+    def buffered_bytes(self) -> int:
+        """Bytes of the frames kept in memory, not yet written (samples are a few % of it)."""
+        return self._buffered
 
     def flush(self, steps: int, **attrs) -> None:
         """Write the rows kept so far, and ``steps`` and ``attrs``, in one open of the file."""
@@ -497,6 +500,7 @@ class RunWriter:
                 ds[start : start + k] = np.stack(values)
                 values.clear()
             setattr(self, count, start + k)
+        self._buffered = 0
         f.attrs["steps"] = steps
         for key, value in attrs.items():
             f.attrs[key] = value

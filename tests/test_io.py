@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import subprocess
 import sys
 
@@ -13,7 +14,8 @@ import numpy as np
 import pytest
 
 from taichi_ice import Simulation, __version__, load_scenario
-from taichi_ice.io import RunWriter
+from taichi_ice import simulation
+from taichi_ice.io import RunWriter, read_run
 from taichi_ice.scenario import scene_from_dict
 
 SERIES = {
@@ -207,7 +209,7 @@ def test_another_process_reads_the_file_while_the_run_writes_it(tmp_path, monkey
             seen.append(json.loads(out.stdout.strip().splitlines()[-1]))
 
     monkeypatch.setattr(RunWriter, "flush", flush_then_read)
-    Simulation(scene, **run_opts).run(out=path)
+    Simulation(scene, **run_opts).run(out=path, flush_every=0)
     assert seen == [
         {
             "status": "running",
@@ -219,3 +221,41 @@ def test_another_process_reads_the_file_while_the_run_writes_it(tmp_path, monkey
     with h5py.File(path, "r") as f:  # a finished file needs no SWMR
         assert f.attrs["status"] == "complete"
         assert f["frames/time"].shape == (round(DURATION / OUTPUT_INTERVAL) + 1,)
+
+
+def test_rows_kept_in_memory_are_written_as_if_at_every_frame(tmp_path, monkeypatch, run_opts):
+    """flush_every=0 writes the file at every frame, inf only at the end, and a bound on the
+    bytes kept writes it as soon as a frame is kept: the three files hold the same rows,
+    value for value."""
+    written: list[int] = []
+    flush = RunWriter.flush
+
+    def counted(self, steps, **attrs):
+        flush(self, steps, **attrs)
+        written.append(self.n_frames)
+
+    monkeypatch.setattr(RunWriter, "flush", counted)
+    scene = colliding_squares()
+    cases = {
+        "each": (0.0, simulation.FLUSH_BYTES),
+        "end": (math.inf, simulation.FLUSH_BYTES),
+        "bytes": (math.inf, 1),
+    }
+    runs = {}
+    for name, (every, bound) in cases.items():
+        monkeypatch.setattr(simulation, "FLUSH_BYTES", bound)
+        written.clear()
+        Simulation(scene, **run_opts).run(out=tmp_path / f"{name}.h5", flush_every=every)
+        runs[name] = (list(written), read_run(tmp_path / f"{name}.h5"))
+    n_frames = round(DURATION / OUTPUT_INTERVAL) + 1
+    # The frame at t = 0 waits for the next; every later frame is written as it comes.
+    assert runs["each"][0] == list(range(2, n_frames + 1))
+    assert runs["end"][0] == []  # the rows kept are written by close, not flush
+    assert runs["bytes"][0] == runs["each"][0]
+    for name in ("end", "bytes"):
+        for group in ("series", "frames"):
+            a, b = runs["each"][1][group], runs[name][1][group]
+            assert a.keys() == b.keys() and len(a["time"]) > 1
+            for key in a:
+                np.testing.assert_array_equal(b[key], a[key], err_msg=f"{name}: {group}/{key}")
+    assert len(runs["end"][1]["frames"]["time"]) == n_frames

@@ -13,8 +13,7 @@ import h5py
 import numpy as np
 import pytest
 
-from taichi_ice import Simulation, __version__, load_scenario
-from taichi_ice import simulation
+from taichi_ice import Simulation, __version__, load_scenario, simulation
 from taichi_ice.io import RunWriter, read_run
 from taichi_ice.scenario import scene_from_dict
 

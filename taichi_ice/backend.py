@@ -29,6 +29,8 @@ _actual: str | None = None
 _CPU_ARCHES = ("x64", "arm64", "cpu")
 # Seconds a child process may take to start Taichi on a GPU arch (import + driver start).
 PROBE_TIMEOUT = 180.0
+# Bytes of compiled kernels Taichi keeps on disk between processes (see ``init``).
+OFFLINE_CACHE_BYTES = 1 << 30
 
 # The line ti.init prints unconditionally (taichi/lang/misc.py, a plain print to stdout).
 _START_LINE = "[Taichi] Starting on arch="
@@ -152,6 +154,12 @@ def init(arch: str = "cpu", precision: str = "f64", *, reinit: bool = False) -> 
             default_ip=ti.i32,
             log_level=ti.WARN,
             offline_cache=True,
+            # Taichi's default cache holds 100 MB and, past it, drops the least recently used
+            # quarter when a process ends. Kernels specialise on their batch's layout, and
+            # the test suite alone compiles ~150 MB of them, so at 100 MB every run evicted
+            # what the next one needed and compiled it again (the suite took 16-26 min
+            # instead of ~7). 1 GiB holds the suite and a user's scenes with room to spare.
+            offline_cache_max_size_of_files=OFFLINE_CACHE_BYTES,
             # On the CPU Taichi otherwise cuts an outermost loop into one chunk per thread of
             # at least 512 iterations, ignoring loop_config: a batch of 17 worlds, stepped a
             # thread each, ran on one core (measured: 2 worlds took twice as long as 1). Off,

@@ -776,3 +776,16 @@ def test_crushing_caps_the_force_and_books_the_lost_energy(run_opts):
         f"without); crushing {after['crushing_energy']:.2f} J of {came_in:.1f}; rebound "
         f"{after['kinetic_energy']:.2f} J; residual {after['residual']:.2e} J"
     )
+
+
+def test_taichi_keeps_the_compiled_kernels_of_many_layouts_between_processes(taichi_runtime):
+    """Kernels specialise on the batch's layout, so a session compiles a set per layout;
+    Taichi's default on-disk cache (100 MB, least recently used quarter dropped past it) is
+    smaller than the test suite's kernels alone and made every run compile them again."""
+    from taichi.lang import impl
+
+    from taichi_ice import backend
+
+    config = impl.get_runtime().prog.config()
+    assert config.offline_cache
+    assert config.offline_cache_max_size_of_files == backend.OFFLINE_CACHE_BYTES >= 1 << 30

@@ -51,7 +51,8 @@ class RunResult:
     Attributes:
         series: per world, ``{name: array}`` as in the HDF5 ``/series`` group.
         paths: HDF5 files written (empty if ``out`` was None).
-        steps: steps taken. dt: time step (s). wall_time: seconds of wall clock.
+        steps: steps taken; for a failed run, to the sample that found the failure.
+        dt: time step (s). wall_time: seconds of wall clock.
         status: 'complete' or 'failed'. failure: the error message if failed.
         warning: why the result is suspect ("" if not): a dt forced above the stability
             limit, a budget residual past ``RESIDUAL_WARNING``.
@@ -350,6 +351,9 @@ class Simulation:
         start = _time.perf_counter()
         last_checkpoint = last_flush = _time.monotonic()
         status, failure, warning = "complete", "", ""
+        # Steps to the last sample checked: a failed run's files and result end there (the
+        # launch that found it may have stepped on to its plan's end).
+        seen = self.world.steps
         stop = _StopRequest()
         try:
             with stop.deferring():
@@ -373,6 +377,7 @@ class Simulation:
                         plan.append((n, int(at % self.series_every == 0 or at == n_end)))
                     rows, impulses = self.world.advance_sampled(plan)
                     for s, ((_n, record), end) in enumerate(zip(plan, ends)):
+                        seen = end
                         self._check_status(rows[s, :, STATUS_COLUMN:], end * self.dt)
                         if record:
                             since = end % self.series_every or self.series_every
@@ -420,14 +425,15 @@ class Simulation:
             status = "failed"
             failure = str(exc) or type(exc).__name__
             # What was sampled before the failure travels with the error (``exc.result``).
-            exc.result = self._result(series, paths, status, failure, start)
+            exc.result = self._result(series, paths, status, failure, start, seen)
             raise
         finally:
             wall = _time.perf_counter() - start
             bar.close()
             for w in writers:
-                w.close(status, failure, steps=self.world.steps, wall_time=wall, warning=warning)
-        result = self._result(series, paths, status, failure, start)
+                steps = seen if status == "failed" else self.world.steps
+                w.close(status, failure, steps=steps, wall_time=wall, warning=warning)
+        result = self._result(series, paths, status, failure, start, self.world.steps)
         result.warning = warning
         return result
 
@@ -455,11 +461,11 @@ class Simulation:
             "scene (a body far from the others, a tiny block)"
         )
 
-    def _result(self, series, paths, status: str, failure: str, start: float) -> RunResult:
+    def _result(self, series, paths, status, failure, start, steps: int) -> RunResult:
         return RunResult(
             series=[{k: np.asarray(v) for k, v in s.items()} for s in series],
             paths=paths,
-            steps=self.world.steps,
+            steps=steps,
             dt=self.dt,
             wall_time=_time.perf_counter() - start,
             status=status,

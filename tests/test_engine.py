@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 
 import numpy as np
 import pytest
@@ -730,13 +731,19 @@ def test_forced_unstable_run_stops_with_a_readable_failed_file(tmp_path, run_opt
     path = tmp_path / "diverged.h5"
     sim = Simulation(scene, dt=5.0 * scene.stable_dt, force_dt=True, **run_opts)
     assert sim.dt > scene.stable_dt
-    with pytest.raises(DivergenceError):
+    with pytest.raises(DivergenceError) as caught:
         sim.run(until=1.0, out=path)
     run = read_run(path)
     assert run["attrs"]["status"] == "failed"
     assert "diverged" in run["attrs"]["failure"]
     assert 1 <= len(run["series"]["time"]) < 100
     assert run["frames"]["position"].shape[1:] == (5, 2)
+    # The file and the result end at the sample that found it, the time the message names
+    # (the launch that found it may have stepped on to the next frame).
+    when = float(re.search(r" at t = (\S+) s", run["attrs"]["failure"]).group(1))
+    assert run["attrs"]["steps"] == caught.value.result.steps
+    assert run["attrs"]["steps"] * sim.dt == pytest.approx(when, rel=1e-3)
+    assert run["series"]["time"][-1] <= when * (1 + 1e-9)
 
 
 # --------------------------------------------------------------------------------------------

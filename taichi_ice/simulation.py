@@ -461,7 +461,9 @@ class Simulation:
             "scene (a body far from the others, a tiny block)"
         )
 
-    def _result(self, series, paths, status, failure, start, steps: int) -> RunResult:
+    def _result(
+        self, series, paths, status: str, failure: str, start: float, steps: int
+    ) -> RunResult:
         return RunResult(
             series=[{k: np.asarray(v) for k, v in s.items()} for s in series],
             paths=paths,

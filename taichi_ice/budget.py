@@ -1,13 +1,17 @@
 """The energy budget of a world: its terms, the energy that came in, and the residual.
 
     came_in  = (kinetic + elastic)(0) + work_in
-    residual = came_in - (kinetic + elastic + friction + viscous + drag + crushing)
+    residual = came_in - (kinetic + elastic + friction + viscous + drag + crushing + severed)
 
 ``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
 of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water,
-``crushing`` the overlap beyond the ice's strength (0 unless ``[ice] crushing_strength``);
-``kinetic`` and ``elastic`` are what the world holds now (the overlaps and the tangential
-springs). The residual is the time discretisation error of the explicit step. Between
+``crushing`` the overlap beyond the ice's strength (0 unless ``[ice] crushing_strength``),
+``severed`` the work the tangential stick springs still held when their contacts ended
+(their stiffness follows the contact width, so the work done on a spring need not come
+back; it can be negative; ``codes.BodyEnergy.SEVERED``); ``kinetic`` and ``elastic`` are
+what the world holds now (the overlaps and the tangential springs). The residual is the
+time discretisation error of the explicit step: it shrinks with dt, at first order (without
+the severed term it did not: docs/accuracy.md). Between
 collisions it is small; inside one it is not, at any dt below the limit (the contacts' work
 is booked at the start-of-step velocity: ``BREACH``), so a divergence is judged without the
 elastic term (``created``, ``breached``), and the whole residual at the end of a run.
@@ -32,7 +36,13 @@ SERIES: tuple[str, ...] = tuple(
 )
 # The terms that hold energy now and the ones that accumulate its losses.
 HELD = ("kinetic_energy", "elastic_energy")
-DISSIPATED = ("friction_energy", "viscous_energy", "drag_energy", "crushing_energy")
+DISSIPATED = (
+    "friction_energy",
+    "viscous_energy",
+    "drag_energy",
+    "crushing_energy",
+    "severed_energy",
+)
 
 # The run is stopped as diverged once a world's kinetic energy and what it has dissipated
 # exceed what came in by this fraction of it (``breached``): an explicit step past its
@@ -63,7 +73,7 @@ def as_series(table: np.ndarray) -> dict[str, np.ndarray]:
 
 def _initial(terms: Mapping[str, Any]) -> dict[str, Any]:
     # The first sample of each series: a run's budget starts at t = 0.
-    # (Files written before the crushing term have no crushing_energy: it was 0.)
+    # (Files written before the crushing or severed term have none: it was 0 or not kept.)
     return {k: np.asarray(terms.get(k, 0.0)).reshape(-1)[0] for k in SERIES}
 
 

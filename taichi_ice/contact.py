@@ -35,7 +35,10 @@ name is the NumPy reference, ``_ti`` the Taichi function): ``normal_force`` and
 Energy: friction (slip), viscous (dashpots) go to the owner's ``body_energy`` row; the
 normal elastic energy of a contact is the work its elastic force ``k_e A`` has done on the
 approach, ``integral k_e A v_n dt``, so that the budget closes up to a residual that shrinks
-with dt (for translation along the normal it is ``integral k_e A dA / L``).
+with dt (for translation along the normal it is ``integral k_e A dA / L``). The tangential
+stick spring's part of it is also kept alone (``contact_spring``): when the contact ends,
+what the spring still holds goes to the owner's ``SEVERED`` term (its stiffness follows the
+contact width, so that work need not come back: ``codes.BodyEnergy.SEVERED``).
 """
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
@@ -197,6 +200,7 @@ class ContactStage(Stage):
                 "contact_partner",
                 "contact_xi",
                 "contact_elastic",
+                "contact_spring",
                 "contact_theta",
                 "contact_crushed",
                 "body_force_q",
@@ -209,6 +213,7 @@ class ContactStage(Stage):
                 "contact_partner",
                 "contact_xi",
                 "contact_elastic",
+                "contact_spring",
                 "contact_theta",
                 "contact_crushed",
                 "body_force_q",
@@ -222,6 +227,7 @@ class ContactStage(Stage):
                 "contact_partner",
                 "contact_xi",
                 "contact_elastic",
+                "contact_spring",
                 "contact_theta",
                 "contact_crushed",
                 "body_force_q",
@@ -322,6 +328,7 @@ class ContactStage(Stage):
         n_p,
         xi,
         elastic,
+        spring,
         theta,
         crushed,
         used,
@@ -330,9 +337,9 @@ class ContactStage(Stage):
     ):
         """Contact between owner i, whose outline relative to its centroid is ``p`` (its
         edges' outward normals ``p_normals``), and
-        partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``theta``,
-        ``crushed``: zero and ``NO_INTERFACE`` if it was not in contact). Returns the owner's
-        new slot count."""
+        partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``spring``,
+        ``theta``, ``crushed``: zero and ``NO_INTERFACE`` if it was not in contact). Returns
+        the owner's new slot count."""
         m, d = ti.static((self.model, self.data))
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
         q, n_q = self.outline(j, xi_)
@@ -403,7 +410,9 @@ class ContactStage(Stage):
             # error dt does not shrink.) Tangential: the spring's energy change at this
             # step's stiffness, which follows the width.
             elastic += f_el * approach * dt - crush_work
-            elastic += 0.5 * k_t * (xi_new * xi_new - xi * xi)
+            spring_work = 0.5 * k_t * (xi_new * xi_new - xi * xi)
+            elastic += spring_work
+            spring += spring_work
             # The owner's rows: plain stores (an augmented assignment would be an atomic).
             viscous = (f_n - f_el) * approach * dt + damp_work
             d.body_energy[i, BodyEnergy.FRICTION] = (
@@ -418,6 +427,7 @@ class ContactStage(Stage):
                 d.contact_partner[i, used] = j
                 d.contact_xi[i, used] = xi_new
                 d.contact_elastic[i, used] = elastic
+                d.contact_spring[i, used] = spring
                 if ti.static(self.layout.rate_state):
                     d.contact_theta[i, used] = theta_new
                 if ti.static(self.layout.crushing):
@@ -488,6 +498,7 @@ class ContactStage(Stage):
             partner=ti.Vector.zero(ti.i32, k),
             xi=ti.Vector.zero(self.layout.real, k),
             elastic=ti.Vector.zero(self.layout.real, k),
+            spring=ti.Vector.zero(self.layout.real, k),
             theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
             crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
         )
@@ -496,6 +507,7 @@ class ContactStage(Stage):
             old.partner[s] = d.contact_partner[i, s]
             old.xi[s] = d.contact_xi[i, s]
             old.elastic[s] = d.contact_elastic[i, s]
+            old.spring[s] = d.contact_spring[i, s]
             if ti.static(self.layout.rate_state):
                 old.theta[s] = d.contact_theta[i, s]
             if ti.static(self.layout.crushing):
@@ -513,22 +525,36 @@ class ContactStage(Stage):
         # The owner's outline and its edges' normals once for all its candidates.
         p, n_p = self.outline(i, d.body_pos[i])
         p_normals = edge_normals_ti(p, n_p)
+        # What the stick springs of the last step's contacts held, less what carries on:
+        # the springs of the contacts that ended (``BodyEnergy.SEVERED``).
+        severed = ti.cast(0.0, ti.f64)
+        for s in range(n_old):
+            severed += ti.cast(old.spring[s], ti.f64)
         for k in range(ti.min(n, self.n_cand)):
             # The pair's memory from the last step, if it was in contact then.
             j = cand[k]
             xi = ti.cast(0.0, self.layout.real)
             elastic = ti.cast(0.0, self.layout.real)
+            spring = ti.cast(0.0, self.layout.real)
             theta = ti.cast(NO_INTERFACE, self.layout.real)
             crushed = ti.cast(0.0, self.layout.real)
             for s in range(n_old):
                 if old.partner[s] == j:
                     xi = old.xi[s]
                     elastic = old.elastic[s]
+                    spring = old.spring[s]
                     if ti.static(self.layout.rate_state):
                         theta = old.theta[s]
                     if ti.static(self.layout.crushing):
                         crushed = old.crushed[s]
-            used = self.pair(i, j, p, p_normals, n_p, xi, elastic, theta, crushed, used, dt, serial)
+            carried = self.pair(
+                i, j, p, p_normals, n_p, xi, elastic, spring, theta, crushed, used, dt, serial
+            )
+            if carried > used:  # in contact: its memory carries on
+                severed -= ti.cast(spring, ti.f64)
+            used = carried
+        e = d.body_energy[i, BodyEnergy.SEVERED]
+        d.body_energy[i, BodyEnergy.SEVERED] = e + severed
         d.contact_count[i] = ti.min(used, self.layout.slots)
         # More contacts than slots, or more near neighbours than the candidate list holds,
         # is reported (never silently dropped): the caller turns it into CapacityError.

@@ -82,6 +82,7 @@ class EnergyMeter(Stage):
             row[EnergyTerm.DRAG] += d.body_energy[i, BodyEnergy.DRAG]
             row[EnergyTerm.WORK_IN] += d.body_energy[i, BodyEnergy.WORK]
             row[EnergyTerm.CRUSHING] += d.body_energy[i, BodyEnergy.CRUSHING]
+            row[EnergyTerm.SEVERED] += d.body_energy[i, BodyEnergy.SEVERED]
         return row, contacts
 
     @ti.kernel

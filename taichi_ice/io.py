@@ -16,8 +16,8 @@ Layout (one file per world; DESIGN.md section 3):
   (N + 1,).
 - ``/series/``: ``time`` (T,), ``probe_force`` (T, P, 2) mean contact force on each probe
   body over the sample interval (N), ``friction_energy``, ``viscous_energy``,
-  ``drag_energy``, ``kinetic_energy``, ``elastic_energy``, ``crushing_energy``, ``work_in``
-  (T,) in J, and ``n_contacts`` (T,).
+  ``drag_energy``, ``kinetic_energy``, ``elastic_energy``, ``crushing_energy``,
+  ``severed_energy``, ``work_in`` (T,) in J, and ``n_contacts`` (T,).
 - ``/frames/``: ``time`` (F,), ``position`` (F, N, 2), ``angle`` (F, N), ``velocity``
   (F, N, 2), ``omega`` (F, N); every body in scene order.
 - ``/bodies/``: ``names``, ``kinds``, ``vertices`` (V, 2) centroid-relative outlines and
@@ -69,6 +69,7 @@ _ENERGY_NAMES = {
     "kinetic_energy": "kinetic energy, translational and rotational",
     "elastic_energy": "elastic energy in overlaps and tangential springs",
     "crushing_energy": "energy dissipated by crushing beyond the ice strength (cumulative)",
+    "severed_energy": "work held by stick springs when their contacts ended (cumulative)",
 }
 VARIABLES: dict[str, dict[str, tuple[str, str]]] = {
     "": {

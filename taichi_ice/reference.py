@@ -71,6 +71,8 @@ class ContactMemory:
         xi: tangential spring stretch along the tangent (m).
         area: overlap area at the last step (m^2).
         elastic: elastic energy stored in the contact (J), normal and tangential.
+        spring: the tangential stick spring's part of ``elastic`` (J): the work done on it,
+            booked as severed (``BodyEnergy.SEVERED``) when the contact ends.
         theta: rate-and-state variable; ``slip.NO_INTERFACE`` when the contact has no
             sliding interface (and for Coulomb).
         crushed: overlap area crushed so far (m^2).
@@ -79,6 +81,7 @@ class ContactMemory:
     xi: float = 0.0
     area: float = 0.0
     elastic: float = 0.0
+    spring: float = 0.0
     theta: float = NO_INTERFACE
     crushed: float = 0.0
 
@@ -230,8 +233,8 @@ def contact_force(
     force = f_n * normal + f_t * tangent
     # Elastic energy stored in the contact: the work of its elastic forces (normal on the
     # approach, less what crushed; tangential at this step's stiffness).
-    elastic = old.elastic + f_el * approach * dt - crushing_work
-    elastic += 0.5 * k_t * (xi_new * xi_new - old.xi * old.xi)
+    spring_work = 0.5 * k_t * (xi_new * xi_new - old.xi * old.xi)
+    elastic = old.elastic + f_el * approach * dt - crushing_work + spring_work
     viscous = (f_n - f_el) * approach * dt + damp_work
     return ContactForce(
         area=area,
@@ -249,7 +252,12 @@ def contact_force(
         torque_owner=-_cross(r_i, force),
         torque_partner=_cross(r_j, force),
         memory=ContactMemory(
-            xi=xi_new, area=area, elastic=elastic, theta=theta_new, crushed=crushed
+            xi=xi_new,
+            area=area,
+            elastic=elastic,
+            spring=old.spring + spring_work,
+            theta=theta_new,
+            crushed=crushed,
         ),
         slip_work=slip_work,
         viscous_work=viscous,
@@ -477,6 +485,10 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             new.body_energy[i, BodyEnergy.VISCOUS] += c.viscous_work
             new.body_energy[i, BodyEnergy.CRUSHING] += c.crushing_work
             contacts[(i, j)] = c.memory
+    # A contact that ended takes the work its stick spring still held with it.
+    for (i, j), mem in state.contacts.items():
+        if (i, j) not in contacts:
+            new.body_energy[i, BodyEnergy.SEVERED] += mem.spring
     new.contacts = contacts
 
     for i in range(n):
@@ -528,6 +540,7 @@ def reference_energies(state: ReferenceState, model: ReferenceModel) -> np.ndarr
         out[w, EnergyTerm.DRAG] += state.body_energy[i, BodyEnergy.DRAG]
         out[w, EnergyTerm.WORK_IN] += state.body_energy[i, BodyEnergy.WORK]
         out[w, EnergyTerm.CRUSHING] += state.body_energy[i, BodyEnergy.CRUSHING]
+        out[w, EnergyTerm.SEVERED] += state.body_energy[i, BodyEnergy.SEVERED]
     for (i, _j), mem in state.contacts.items():
         out[model.world[i], EnergyTerm.ELASTIC] += mem.elastic
     return out

@@ -203,6 +203,7 @@ DATA: tuple[Var, ...] = (
     Var("contact_count", "i32", ("n_bodies",), "", "used slots of each body"),
     Var("contact_xi", "real", ("n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
     Var("contact_elastic", "real", ("n_bodies", "slots"), "J", "elastic energy stored in the contact: work of its normal and tangential springs", role="diagnostic"),
+    Var("contact_spring", "real", ("n_bodies", "slots"), "J", "the tangential stick spring's part of contact_elastic (booked as severed when the contact ends)", role="diagnostic"),
     Var("contact_theta", "real", ("n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
     Var("contact_crushed", "real", ("n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
     Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic"),

@@ -130,17 +130,23 @@ def pair_scenes(rng: np.random.Generator, law) -> tuple[list, np.ndarray, np.nda
 
 
 def kernel_contacts(world: World) -> dict:
-    """``{(owner, partner): (xi, elastic, theta)}`` from the contact slots."""
+    """``{(owner, partner): (xi, elastic, theta, spring)}`` from the contact slots."""
     d = world.data
     count = d.contact_count.to_numpy()
     partner = d.contact_partner.to_numpy()
     xi, elastic = d.contact_xi.to_numpy(), d.contact_elastic.to_numpy()
+    spring = d.contact_spring.to_numpy()
     theta = d.contact_theta.to_numpy() if world.layout.rate_state else None
     out = {}
     for i in range(world.layout.n_bodies):
         for s in range(count[i]):
             th = float(theta[i, s]) if theta is not None else 0.0
-            out[(i, int(partner[i, s]))] = (float(xi[i, s]), float(elastic[i, s]), th)
+            out[(i, int(partner[i, s]))] = (
+                float(xi[i, s]),
+                float(elastic[i, s]),
+                th,
+                float(spring[i, s]),
+            )
     return out
 
 
@@ -156,7 +162,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
     omega = np.asarray(d.body_omega.to_numpy(), dtype=np.float64)
     state = ReferenceState(pos=pos, angle=ang, vel=vel, omega=omega)
     memory: dict = {}
-    seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0}
+    seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0, "severed": 0}
     worst = 0.0  # largest force difference (N)
     for step in range(2):
         world.place(state.pos, state.angle)
@@ -190,7 +196,11 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                 law=model.laws[w],
                 memory=memory.get((i, j)),
             )
+            # A contact that ended books what its stick spring held (``SEVERED``).
+            held = memory[(i, j)].spring if (i, j) in memory and c is None else 0.0
+            assert energy[i, BodyEnergy.SEVERED] == pytest.approx(held, rel=1e-8, abs=1e-15)
             if c is None:
+                seen["severed"] += (i, j) in memory
                 for k in (i, j):
                     assert np.all(force_q[k] == 0) and torque_q[k] == 0
                 continue
@@ -214,10 +224,11 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                 c.viscous_work, rel=1e-8, abs=1e-12
             )
         assert set(contacts) == set(expected)
-        for key, (xi, elastic, theta) in contacts.items():
+        for key, (xi, elastic, theta, spring) in contacts.items():
             want = expected[key]
             assert xi == pytest.approx(want.xi, rel=1e-8, abs=1e-15)
             assert elastic == pytest.approx(want.elastic, rel=1e-8, abs=1e-12)
+            assert spring == pytest.approx(want.spring, rel=1e-8, abs=1e-12)
             assert theta == pytest.approx(want.theta, rel=TWIN_RTOL, abs=1e-15)
         memory = expected
         # Half a millisecond later, without the forces: the same pairs, most still touching.
@@ -225,6 +236,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
         state.angle = state.angle + 5e-4 * state.omega
     print(f"{seen}; largest force difference {worst / FORCE_QUANTUM:.0f} x 2^-24 N")
     assert seen["slip"] > 20 and seen["stick"] > 20 and seen["remembered"] > 50
+    assert seen["severed"] > 5  # contacts that ended on the second step
     assert seen["fallback"] > 0
 
 

@@ -26,6 +26,7 @@ SERIES = {
     "kinetic_energy",
     "elastic_energy",
     "crushing_energy",
+    "severed_energy",
     "work_in",
     "n_contacts",
 }

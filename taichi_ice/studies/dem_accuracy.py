@@ -252,6 +252,7 @@ def _read(path: Path) -> dict[str, np.ndarray]:
         "viscous_energy",
         "drag_energy",
         "crushing_energy",
+        "severed_energy",
     )
     out = {k: np.asarray(s[k]) for k in keys if k in s}
     out["probe_force"] = np.asarray(s["probe_force"])

@@ -32,8 +32,9 @@ import numpy as np
 from . import provenance
 from .errors import RunFileError
 
-FORMAT_VERSION = "3"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
-#                       3: a status word per world
+FORMAT_VERSION = "4"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+#                       3: a status word per world;
+#                       4: each contact's stick-spring energy, a severed energy column
 SUFFIX = ".ckpt"
 
 

@@ -553,8 +553,9 @@ class ContactStage(Stage):
             if carried > used:  # in contact: its memory carries on
                 severed -= ti.cast(spring, ti.f64)
             used = carried
-        e = d.body_energy[i, BodyEnergy.SEVERED]
-        d.body_energy[i, BodyEnergy.SEVERED] = e + severed
+        if severed != 0.0:  # most bodies, most steps: no contact ended, no row touched
+            e = d.body_energy[i, BodyEnergy.SEVERED]
+            d.body_energy[i, BodyEnergy.SEVERED] = e + severed
         d.contact_count[i] = ti.min(used, self.layout.slots)
         # More contacts than slots, or more near neighbours than the candidate list holds,
         # is reported (never silently dropped): the caller turns it into CapacityError.

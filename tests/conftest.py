@@ -6,7 +6,14 @@ Taichi compiles each kernel once per process, so every test module shares this r
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# Compile without Taichi's advanced passes (about 3x faster, same trajectories: see
+# taichi_ice/backend.py and test_backend.py), here and in the processes tests start. Most of a
+# cold run of the suite is compiling. TAICHI_ICE_OPTIMIZE=1 tests the optimised kernels.
+os.environ.setdefault("TAICHI_ICE_OPTIMIZE", "0")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

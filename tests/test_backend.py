@@ -1,0 +1,74 @@
+"""The compile setting the suite runs under changes nothing a run computes.
+
+The suite compiles without Taichi's advanced passes (``conftest.py``), which is about 3x
+faster; users' runs compile with them. This holds the two against each other bit for bit,
+in two fresh processes (Taichi's settings are per process), on both ways of stepping: a
+world a thread (the pillar scene with rate-and-state friction through its jam) and bodies in
+parallel (a box of 300 diamonds at random angles and velocities).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from taichi_ice import backend
+
+_RUN = """
+import hashlib, sys
+from taichi.lang import impl
+from taichi_ice import backend, load_scenario
+from taichi_ice.bench.scenes import bench_scene
+from taichi_ice.friction import parse_law
+from taichi_ice.world import World
+
+backend.init("cpu", "f64")
+print("ADVANCED", impl.current_cfg().advanced_optimization)
+def digest(w):
+    return hashlib.sha1(
+        w.positions().tobytes() + w.velocities().tobytes() + w.angles().tobytes()
+    ).hexdigest()
+w = World([load_scenario("pillar").with_friction(parse_law("rate-state"))])
+w.advance(3000)
+w.check()
+print("PILLAR", digest(w))
+scene, _ = bench_scene("random", 300, "rate-state", False, 0)
+w = World([scene], stepping="bodies")
+w.advance(300)
+w.check()
+print("BOX", digest(w), int(w.contact_counts().sum()))
+"""
+
+
+def _run(optimize: str) -> dict[str, str]:
+    env = dict(os.environ, TAICHI_ICE_OPTIMIZE=optimize)
+    proc = subprocess.run(
+        [sys.executable, "-c", _RUN], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    lines = [ln.split(" ", 1) for ln in proc.stdout.splitlines() if ln[:1].isupper()]
+    return {k: v for k, v in lines}
+
+
+def test_optimised_and_fast_compiled_kernels_step_the_same():
+    fast, full = _run("0"), _run("1")
+    assert fast["ADVANCED"] == "False" and full["ADVANCED"] == "True"
+    contacts = int(full["BOX"].split()[1])
+    assert contacts > 20  # blocks are colliding: the narrow phase worked on many pairs
+    assert fast["PILLAR"] == full["PILLAR"]
+    assert fast["BOX"] == full["BOX"]
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [(None, True), ("1", True), ("yes", True), ("0", False), ("False", False), (" off ", False)],
+)
+def test_optimize_default_reads_the_environment(monkeypatch, value, expected):
+    if value is None:
+        monkeypatch.delenv(backend.OPTIMIZE_ENV, raising=False)
+    else:
+        monkeypatch.setenv(backend.OPTIMIZE_ENV, value)
+    assert backend.optimize_default() is expected

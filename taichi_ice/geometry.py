@@ -482,10 +482,7 @@ def _edge_penetration_ti(own: ti.template(), n_own, other: ti.template(), n_othe
     a = _row(own, k)
     e = _row(own, _after(k, n_own)) - a
     n = ti.math.vec2(e[1], -e[0]).normalized()
-    lowest = ti.math.dot(n, _row(other, 0) - a)
-    for j in range(1, n_other):
-        lowest = ti.min(lowest, ti.math.dot(n, _row(other, j) - a))
-    return -lowest, n
+    return _reach_past_ti(a, n, other, n_other), n
 
 
 @ti.func
@@ -495,10 +492,17 @@ def _normal_penetration_ti(
     """:func:`_edge_penetration_ti` with the outward unit normals of ``own`` given."""
     a = _row(own, k)
     n = _row(normals, k)
+    return _reach_past_ti(a, n, other, n_other), n
+
+
+@ti.func
+def _reach_past_ti(a, n, other: ti.template(), n_other):
+    """How far ``other`` reaches past the line through ``a`` with outward unit normal ``n``
+    (m; <= 0: the line separates them)."""
     lowest = ti.math.dot(n, _row(other, 0) - a)
     for j in range(1, n_other):
         lowest = ti.min(lowest, ti.math.dot(n, _row(other, j) - a))
-    return -lowest, n
+    return -lowest
 
 
 @ti.func

@@ -125,3 +125,18 @@ def test_quick_study_runs_and_its_collisions_match_the_ode(tmp_path):
     assert checked == 5  # face on: restitution, duration; offset: those and the spin
     residuals = [p["error"] for p in points if p["measure"] == "budget residual"]
     assert len(residuals) == 1 and residuals[0] < BUDGET_RTOL
+
+
+def test_timing_runs_the_span_beyond_where_the_run_stopped():
+    """``_timed`` times ``span`` more seconds: a run already past the span still steps
+    (``Simulation.run`` takes the time to reach, not a duration)."""
+    from taichi_ice.simulation import Simulation
+
+    scene = dem_scenes.collision(dem_scenes.OFFSET, "coulomb")
+    dt = dem_accuracy.DEFAULT_RATIO * scene.stable_dt
+    sim = Simulation([dem_scenes.with_step(scene, dt, dem_accuracy.SAMPLE)], dt=dt)
+    sim.run(until=0.05)
+    timing = dem_accuracy._timed(sim, 0.02)
+    assert timing["timed_steps"] == pytest.approx(0.02 / dt, abs=1)
+    assert timing["wall_per_step_s"] > 0
+    assert sim.time == pytest.approx(0.07, abs=dt)

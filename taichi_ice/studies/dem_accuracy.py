@@ -232,7 +232,7 @@ def run_collisions(store: Store, precision: str, cfg: dict[str, Any], log) -> No
                 "law": law,
                 "precision": precision,
                 "dt": sim.dt,
-                **_timed(sim, COLLISION_TIMING_UNTIL),
+                **_timed(sim, COLLISION_TIMING_UNTIL - sim.time),
             }
         )
 
@@ -262,8 +262,9 @@ def _read(path: Path) -> dict[str, np.ndarray]:
 
 def _timed(sim, span: float) -> dict[str, Any]:
     """Wall per step of ``span`` more seconds on a Simulation whose kernels have run (so no
-    compilation is timed): the cost of one step of this choice."""
-    info, _ = _run(sim, until=span)
+    compilation is timed): the cost of one step of this choice. (``Simulation.run`` takes
+    the time to run until, not a duration.)"""
+    info, _ = _run(sim, until=sim.time + span)
     steps = info.get("steps") or 0
     return {
         "wall_per_step_s": info["wall_s"] / steps if steps and info["wall_s"] else None,

@@ -143,7 +143,8 @@ def test_a_second_writer_is_refused_naming_the_first(tmp_path, capsys):
     assert not lock.exists()
 
 
-CHILD_UNTIL = "60"  # s of simulated time: the children are stopped long before
+CHILD_UNTIL = "1e5"  # s of simulated time: the children are stopped long before (60 s
+# of two squares ran to the end in a few seconds once small worlds stepped fast)
 
 
 def test_sigterm_and_sigkill_leave_files_that_open_with_no_options(tmp_path):

@@ -409,25 +409,28 @@ class ContactStage(Stage):
             # middle, not at the centroid where the force acts, and the budget kept an
             # error dt does not shrink.) Tangential: the spring's energy change at this
             # step's stiffness, which follows the width.
-            elastic += f_el * approach * dt - crush_work
-            spring_work = 0.5 * k_t * (xi_new * xi_new - xi * xi)
-            elastic += spring_work
-            spring += spring_work
-            # The owner's rows: plain stores (an augmented assignment would be an atomic).
-            viscous = (f_n - f_el) * approach * dt + damp_work
-            d.body_energy[i, BodyEnergy.FRICTION] = (
-                d.body_energy[i, BodyEnergy.FRICTION] + slip_work
-            )
-            d.body_energy[i, BodyEnergy.VISCOUS] = d.body_energy[i, BodyEnergy.VISCOUS] + viscous
-            if ti.static(self.layout.crushing):
-                e = d.body_energy[i, BodyEnergy.CRUSHING]
-                d.body_energy[i, BodyEnergy.CRUSHING] = e + crush_work
+            # (Without a budget, ``Layout.energy`` off, none of it is computed.)
+            if ti.static(self.layout.energy):
+                elastic += f_el * approach * dt - crush_work
+                spring_work = 0.5 * k_t * (xi_new * xi_new - xi * xi)
+                elastic += spring_work
+                spring += spring_work
+                # The owner's rows: plain stores (an augmented assignment would be an atomic).
+                viscous = (f_n - f_el) * approach * dt + damp_work
+                e_f = d.body_energy[i, BodyEnergy.FRICTION]
+                d.body_energy[i, BodyEnergy.FRICTION] = e_f + slip_work
+                e_v = d.body_energy[i, BodyEnergy.VISCOUS]
+                d.body_energy[i, BodyEnergy.VISCOUS] = e_v + viscous
+                if ti.static(self.layout.crushing):
+                    e_c = d.body_energy[i, BodyEnergy.CRUSHING]
+                    d.body_energy[i, BodyEnergy.CRUSHING] = e_c + crush_work
 
             if used < self.layout.slots:
                 d.contact_partner[i, used] = j
                 d.contact_xi[i, used] = xi_new
-                d.contact_elastic[i, used] = elastic
-                d.contact_spring[i, used] = spring
+                if ti.static(self.layout.energy):
+                    d.contact_elastic[i, used] = elastic
+                    d.contact_spring[i, used] = spring
                 if ti.static(self.layout.rate_state):
                     d.contact_theta[i, used] = theta_new
                 if ti.static(self.layout.crushing):
@@ -494,11 +497,12 @@ class ContactStage(Stage):
         step overwrites: only the owner's thread touches them, so one buffer suffices), and
         its count."""
         d, k = ti.static((self.data, self.layout.slots))
+        k_e = ti.static(k if self.layout.energy else 1)
         old = ti.Struct(
             partner=ti.Vector.zero(ti.i32, k),
             xi=ti.Vector.zero(self.layout.real, k),
-            elastic=ti.Vector.zero(self.layout.real, k),
-            spring=ti.Vector.zero(self.layout.real, k),
+            elastic=ti.Vector.zero(self.layout.real, k_e),
+            spring=ti.Vector.zero(self.layout.real, k_e),
             theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
             crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
         )
@@ -506,8 +510,9 @@ class ContactStage(Stage):
         for s in range(n_old):
             old.partner[s] = d.contact_partner[i, s]
             old.xi[s] = d.contact_xi[i, s]
-            old.elastic[s] = d.contact_elastic[i, s]
-            old.spring[s] = d.contact_spring[i, s]
+            if ti.static(self.layout.energy):
+                old.elastic[s] = d.contact_elastic[i, s]
+                old.spring[s] = d.contact_spring[i, s]
             if ti.static(self.layout.rate_state):
                 old.theta[s] = d.contact_theta[i, s]
             if ti.static(self.layout.crushing):
@@ -528,8 +533,9 @@ class ContactStage(Stage):
         # What the stick springs of the last step's contacts held, less what carries on:
         # the springs of the contacts that ended (``BodyEnergy.SEVERED``).
         severed = ti.cast(0.0, ti.f64)
-        for s in range(n_old):
-            severed += ti.cast(old.spring[s], ti.f64)
+        if ti.static(self.layout.energy):
+            for s in range(n_old):
+                severed += ti.cast(old.spring[s], ti.f64)
         for k in range(ti.min(n, self.n_cand)):
             # The pair's memory from the last step, if it was in contact then.
             j = cand[k]
@@ -541,8 +547,9 @@ class ContactStage(Stage):
             for s in range(n_old):
                 if old.partner[s] == j:
                     xi = old.xi[s]
-                    elastic = old.elastic[s]
-                    spring = old.spring[s]
+                    if ti.static(self.layout.energy):
+                        elastic = old.elastic[s]
+                        spring = old.spring[s]
                     if ti.static(self.layout.rate_state):
                         theta = old.theta[s]
                     if ti.static(self.layout.crushing):
@@ -550,12 +557,14 @@ class ContactStage(Stage):
             carried = self.pair(
                 i, j, p, p_normals, n_p, xi, elastic, spring, theta, crushed, used, dt, serial
             )
-            if carried > used:  # in contact: its memory carries on
-                severed -= ti.cast(spring, ti.f64)
+            if ti.static(self.layout.energy):
+                if carried > used:  # in contact: its memory carries on
+                    severed -= ti.cast(spring, ti.f64)
             used = carried
-        if severed != 0.0:  # most bodies, most steps: no contact ended, no row touched
-            e = d.body_energy[i, BodyEnergy.SEVERED]
-            d.body_energy[i, BodyEnergy.SEVERED] = e + severed
+        if ti.static(self.layout.energy):
+            if severed != 0.0:  # most bodies, most steps: no contact ended, no row touched
+                e = d.body_energy[i, BodyEnergy.SEVERED]
+                d.body_energy[i, BodyEnergy.SEVERED] = e + severed
         d.contact_count[i] = ti.min(used, self.layout.slots)
         # More contacts than slots, or more near neighbours than the candidate list holds,
         # is reported (never silently dropped): the caller turns it into CapacityError.

@@ -75,14 +75,19 @@ class EnergyMeter(Stage):
                 )
             n = d.contact_count[i]
             contacts += n
-            for s in range(n):
-                row[EnergyTerm.ELASTIC] += ti.cast(d.contact_elastic[i, s], ti.f64)
-            row[EnergyTerm.FRICTION] += d.body_energy[i, BodyEnergy.FRICTION]
-            row[EnergyTerm.VISCOUS] += d.body_energy[i, BodyEnergy.VISCOUS]
-            row[EnergyTerm.DRAG] += d.body_energy[i, BodyEnergy.DRAG]
-            row[EnergyTerm.WORK_IN] += d.body_energy[i, BodyEnergy.WORK]
-            row[EnergyTerm.CRUSHING] += d.body_energy[i, BodyEnergy.CRUSHING]
-            row[EnergyTerm.SEVERED] += d.body_energy[i, BodyEnergy.SEVERED]
+            if ti.static(self.layout.energy):
+                for s in range(n):
+                    row[EnergyTerm.ELASTIC] += ti.cast(d.contact_elastic[i, s], ti.f64)
+                row[EnergyTerm.FRICTION] += d.body_energy[i, BodyEnergy.FRICTION]
+                row[EnergyTerm.VISCOUS] += d.body_energy[i, BodyEnergy.VISCOUS]
+                row[EnergyTerm.DRAG] += d.body_energy[i, BodyEnergy.DRAG]
+                row[EnergyTerm.WORK_IN] += d.body_energy[i, BodyEnergy.WORK]
+                row[EnergyTerm.CRUSHING] += d.body_energy[i, BodyEnergy.CRUSHING]
+                row[EnergyTerm.SEVERED] += d.body_energy[i, BodyEnergy.SEVERED]
+        if ti.static(not self.layout.energy):  # no budget kept: only the kinetic term known
+            for k in ti.static(range(N_TERMS)):
+                if ti.static(k != EnergyTerm.KINETIC):
+                    row[k] = ti.math.nan
         return row, contacts
 
     @ti.kernel
@@ -90,8 +95,9 @@ class EnergyMeter(Stage):
         """Energy terms of every world from the state after a step (``world_energy``)."""
         for w in range(self.layout.n_worlds):
             row, _n = self.terms(w)
-            for k in ti.static(range(N_TERMS)):
-                self.data.world_energy[w, k] = row[k]
+            if ti.static(self.layout.energy):
+                for k in ti.static(range(N_TERMS)):
+                    self.data.world_energy[w, k] = row[k]
 
     @ti.func
     def sample(self, w, s, rows: ti.template(), impulses: ti.template(), record):

@@ -164,12 +164,13 @@ class Integrator(Stage):
             v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
             w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
-            d.body_energy[i, BodyEnergy.DRAG] = d.body_energy[i, BodyEnergy.DRAG] + ti.cast(
-                -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
-            )
-            d.body_energy[i, BodyEnergy.WORK] = d.body_energy[i, BodyEnergy.WORK] + ti.cast(
-                f_ext.dot(vm) * dt, ti.f64
-            )
+            if ti.static(self.layout.energy):
+                e_d = d.body_energy[i, BodyEnergy.DRAG]
+                d.body_energy[i, BodyEnergy.DRAG] = e_d + ti.cast(
+                    -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
+                )
+                e_w = d.body_energy[i, BodyEnergy.WORK]
+                d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
             d.body_vel[i] = v1
             d.body_omega[i] = w1
             d.body_pos[i] = d.body_pos[i] + ti.cast(dt * v1, ti.f64)
@@ -184,9 +185,11 @@ class Integrator(Stage):
         elif kind == BodyKind.KINEMATIC:
             # The contact force f acts on the pusher; the pusher does -f.v on the rest.
             v, w = d.body_vel[i], d.body_omega[i]
-            d.body_energy[i, BodyEnergy.WORK] = d.body_energy[i, BodyEnergy.WORK] + ti.cast(
-                -(f.dot(v) + tau * w) * dt, ti.f64
-            )
+            if ti.static(self.layout.energy):
+                e_w = d.body_energy[i, BodyEnergy.WORK]
+                d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(
+                    -(f.dot(v) + tau * w) * dt, ti.f64
+                )
             d.body_pos[i] = d.body_pos[i] + ti.cast(dt * v, ti.f64)
             d.body_angle[i] = d.body_angle[i] + dt * w
             if w != 0.0:

@@ -198,15 +198,15 @@ DATA: tuple[Var, ...] = (
     Var("vert_turned", "real", ("n_verts",), "m", "outline turned to the body's angle, relative to its centroid (vert_local rotated), updated as the body turns", lanes=2),
     Var("body_force_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "contact force gathered this step, fixed point", lanes=2),
     Var("body_torque_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "contact torque gathered this step, fixed point"),
-    Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic"),
+    Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic", when="energy"),
     Var("contact_partner", "i32", ("n_bodies", "slots"), "id", "partner body of each slot, -1 if empty", init=-1),
     Var("contact_count", "i32", ("n_bodies",), "", "used slots of each body"),
     Var("contact_xi", "real", ("n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
-    Var("contact_elastic", "real", ("n_bodies", "slots"), "J", "elastic energy stored in the contact: work of its normal and tangential springs", role="diagnostic"),
-    Var("contact_spring", "real", ("n_bodies", "slots"), "J", "the tangential stick spring's part of contact_elastic (booked as severed when the contact ends)", role="diagnostic"),
+    Var("contact_elastic", "real", ("n_bodies", "slots"), "J", "elastic energy stored in the contact: work of its normal and tangential springs", role="diagnostic", when="energy"),
+    Var("contact_spring", "real", ("n_bodies", "slots"), "J", "the tangential stick spring's part of contact_elastic (booked as severed when the contact ends)", role="diagnostic", when="energy"),
     Var("contact_theta", "real", ("n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
     Var("contact_crushed", "real", ("n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
-    Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic"),
+    Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic", when="energy"),
     Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
     Var("status", "i32", ("n_worlds", "status_len"), "code", "overflow and divergence flags of each world, codes.Status entries", role="cold"),
     Var("time_step", "real", (), "s", "dt of the run", role="cold"),
@@ -289,6 +289,9 @@ class Layout:
             times the contact width.
         runaway_speed: a dynamic body faster than this (m/s) flags the run as diverged.
         precision: ``"f64"`` or ``"f32"``, the type of every ``real`` field.
+        energy: the energy budget is kept (``body_energy``, the contacts' stored elastic
+            energy, ``world_energy``); off, no kernel computes or stores a term of it, and
+            the samples' energy columns are NaN.
         nbr_len: entries of a body's neighbour list.
         skin: margin (m) of the neighbour lists: a pair is listed when its bounding circles
             come within ``skin`` of each other, and a world's lists are rebuilt when one of
@@ -317,6 +320,7 @@ class Layout:
     crushing_force: float
     runaway_speed: float
     precision: str = "f64"
+    energy: bool = True
     nbr_len: int = 1
     skin: float = 0.0
 

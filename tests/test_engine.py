@@ -22,9 +22,9 @@ import pytest
 
 from taichi_ice import DivergenceError, Simulation, StabilityError, load_scenario
 from taichi_ice.budget import residual as energy_residual
-from taichi_ice.codes import Status
+from taichi_ice.codes import EnergyTerm, Status
 from taichi_ice.energy import CONTACTS_COLUMN, STATUS_COLUMN
-from taichi_ice.errors import CapacityError
+from taichi_ice.errors import CapacityError, UsageError
 from taichi_ice.friction import RateState
 from taichi_ice.geometry import diamond, rectangle, sat_separated, transform
 from taichi_ice.io import read_run
@@ -608,6 +608,46 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law):
         (by_bodies.contact_counts(), by_worlds.contact_counts()),
     ):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("stepping", ["worlds", "bodies"])
+def test_a_world_without_its_energy_budget_moves_the_same_bit_for_bit(f64, stepping):
+    """``energy=False`` drops the budget's fields and arithmetic, nothing that feeds the
+    motion: rate-and-state contacts that came and went move the same, bit for bit, sample
+    for sample; the kinetic energy is still known, the other terms are NaN, and asking for
+    the table says how to get one."""
+    scenes = [
+        scene_from_dict(cluster_scene_dict(seed, 3 + seed, law="rate-state")) for seed in range(3)
+    ]
+    dt = min(s.dt for s in scenes)
+    kept = World(scenes, dt=dt, stepping=stepping)
+    bare = World(scenes, dt=dt, stepping=stepping, energy=False)
+    plan = [(0, 1), (150, 1), (150, 0), (100, 1)]
+    rows_kept, impulses_kept = kept.advance_sampled(plan)
+    rows_bare, impulses_bare = bare.advance_sampled(plan)
+    kept.check()
+    bare.check()
+    for a, b in (
+        (kept.positions(), bare.positions()),
+        (kept.velocities(), bare.velocities()),
+        (kept.angles(), bare.angles()),
+        (kept.omegas(), bare.omegas()),
+        (kept.contact_counts(), bare.contact_counts()),
+        (impulses_kept, impulses_bare),
+        (rows_kept[:, :, EnergyTerm.KINETIC], rows_bare[:, :, EnergyTerm.KINETIC]),
+        (rows_kept[:, :, CONTACTS_COLUMN:], rows_bare[:, :, CONTACTS_COLUMN:]),
+    ):
+        np.testing.assert_array_equal(a, b)
+    assert rows_kept[:, :, CONTACTS_COLUMN].max(axis=0).min() > 0
+    # The budget was at work in the kept run (slip dissipated energy); the bare one has none.
+    assert rows_kept[-1, :, EnergyTerm.FRICTION].min() > 0
+    others = [k for k in range(CONTACTS_COLUMN) if k != EnergyTerm.KINETIC]
+    assert np.isfinite(rows_kept[:, :, others]).all()
+    assert np.isnan(rows_bare[:, :, others]).all()
+    with pytest.raises(UsageError, match="energy=False"):
+        bare.energies()
+    assert bare.data.contact_elastic.shape == (1,)
+    assert kept.data.contact_elastic.shape == (kept.layout.n_bodies, kept.layout.slots)
 
 
 @pytest.mark.parametrize(

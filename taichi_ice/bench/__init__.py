@@ -81,6 +81,12 @@ def add_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--law", default="coulomb", choices=("coulomb", "rate-state"))
     p.add_argument("--water", action="store_true", help="add water drag")
     p.add_argument(
+        "--energy",
+        action="store_true",
+        help="keep the energy budget in the timed runs (default off: like Box2D, the "
+        "benchmark asks for motion only; World(energy=False))",
+    )
+    p.add_argument(
         "--steps",
         type=_steps,
         default=None,
@@ -172,6 +178,7 @@ def bench_command(args: argparse.Namespace) -> int:
         "scene": args.scene,
         "law": args.law,
         "water": args.water,
+        "energy": args.energy,
         "seed": args.seed,
         "arch": args.arch,
         "steps": steps,
@@ -179,8 +186,8 @@ def bench_command(args: argparse.Namespace) -> int:
     }
     print(
         f"bench: {args.scene} box, {args.arch} {'/'.join(precisions)}, {args.law}"
-        f"{', water' if args.water else ''}, {steps} steps per size"
-        + (f", Box2D v3 {box2d.version()}" if box2d_spec else ""),
+        f"{', water' if args.water else ''}{', energy budget' if args.energy else ''}, "
+        f"{steps} steps per size" + (f", Box2D v3 {box2d.version()}" if box2d_spec else ""),
         file=sys.stderr,
     )
     print("  memory bandwidth ...", end="", file=sys.stderr, flush=True)
@@ -288,6 +295,7 @@ def _meta(args, precisions: list[str], steps: int, bandwidth: dict, failed: list
         "precisions": precisions,
         "law": args.law,
         "water": args.water,
+        "energy": args.energy,
         "steps": steps,
         "seed": args.seed,
         "threads": args.threads or os.cpu_count(),

@@ -111,10 +111,10 @@ def device_tasks(steps: int) -> Optional[dict]:
 def measure_size(spec: dict) -> dict:
     """Build, warm up, time and measure one scene; returns ``{"row": ..., "details": ...}``.
 
-    ``spec`` holds ``scene``, ``blocks``, ``law``, ``water``, ``seed``, ``cache`` (a folder
-    for the placement, shared by the runs of a size, or None), ``arch``, ``precision``,
-    ``steps``, ``threads``, and ``box2d`` (None, or the ``dt``, ``substeps`` and list of
-    ``threads`` of ``compare_box2d``).
+    ``spec`` holds ``scene``, ``blocks``, ``law``, ``water``, ``energy`` (keep the budget;
+    default off), ``seed``, ``cache`` (a folder for the placement, shared by the runs of a
+    size, or None), ``arch``, ``precision``, ``steps``, ``threads``, and ``box2d`` (None, or
+    the ``dt``, ``substeps`` and list of ``threads`` of ``compare_box2d``).
     """
     from .. import backend
 
@@ -135,7 +135,7 @@ def measure_size(spec: dict) -> dict:
     progress(f"  {n_blocks} blocks, {spec['precision']}: scene {scene_s:.2f} s", end="")
 
     start = time.perf_counter()
-    world = World([scene], precision=spec["precision"])
+    world = World([scene], precision=spec["precision"], energy=spec.get("energy", False))
     ti.sync()
     world_s = time.perf_counter() - start
     progress(f", world {world_s:.2f} s", end="")
@@ -184,6 +184,7 @@ def measure_size(spec: dict) -> dict:
         "dt_s": world.dt,
         "law": spec["law"],
         "water": int(spec["water"]),
+        "energy": int(spec.get("energy", False)),
         "arch": spec["arch"],
         "precision": spec["precision"],
         "stepping": getattr(world, "stepping", "bodies"),

@@ -32,6 +32,7 @@ CSV_COLUMNS = (
     "dt_s",
     "law",
     "water",
+    "energy",
     "arch",
     "precision",
     "stepping",
@@ -173,8 +174,9 @@ def plot(rows: list[dict], meta: dict, path: Path) -> None:
     dt = first[0]["dt_s"]
     fig.suptitle(
         f"{meta['scene']} box of diamonds at {first[0]['area_fraction']:.0%}, {meta['law']}"
-        f"{', water' if meta['water'] else ''}, dt {dt:.3g} s: {meta['arch']}, {meta['cpu']} "
-        f"x {meta['threads']} threads",
+        f"{', water' if meta['water'] else ''}"
+        f"{', energy budget' if meta.get('energy') else ''}, dt {dt:.3g} s: "
+        f"{meta['arch']}, {meta['cpu']} x {meta['threads']} threads",
         fontsize=9,
     )
     fig.tight_layout()

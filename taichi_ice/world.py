@@ -43,9 +43,11 @@ STAGES = {
 
 # "auto" on the CPU steps worlds of up to this many bodies one thread per world (many steps
 # per launch), larger ones in parallel over bodies. Measured on the 2-core VM, random box of
-# the paper's diamonds, one world: a thread per world 1.2-1.4 M body-steps/s at 300, 1e3 and
-# 3e3 blocks against 0.4, 0.6-0.7 and 0.9 M in parallel over bodies; about equal at 1e4,
-# where rebuilding the lists (all pairs of the world) starts to cost.
+# the paper's diamonds, no budget, engine of 11bff1f: one world, a thread per world is 3.8x
+# as fast as the parallel step at 300 blocks (6-6.8 M body-steps/s against 1.6-1.8 M),
+# 1.2-1.3x at 1e3, about equal at 2e3, 0.8x at 3e3 and 0.5-0.7x at 1e4; two worlds of 3e3
+# blocks 1.1-1.7x, of 1e4 0.8-1.2x. So a lone world of 2e3-4e3 bodies is stepped up to 1.25x
+# slower than it could be; a batch of at least as many worlds as threads is not.
 PER_WORLD_MAX_BODIES = 4000
 # On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).

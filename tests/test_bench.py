@@ -22,7 +22,7 @@ from taichi_ice.bench.scenes import (
     random_scene,
 )
 from taichi_ice.cli import main
-from taichi_ice.codes import BodyKind
+from taichi_ice.codes import BodyEnergy, BodyKind
 
 # Shapely's intersection areas of polygons that only touch are round-off (m^2).
 TOUCH_AREA = 1e-12
@@ -86,6 +86,20 @@ def test_cli_writes_csv_json_and_chart(tmp_path):
     assert record["runs"][0]["blocks"] == 200
     assert record["runs"][0]["box"]["area_fraction"] == pytest.approx(RANDOM_AREA_FRACTION)
     assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    # Like Box2D, the timed runs keep no energy budget unless asked: with it, each body also
+    # holds its budget columns and two reals per contact slot (f64).
+    assert row["energy"] == "0"
+    kept = tmp_path / "kept"
+    assert main([*argv, "--energy", "--warm-cache", "--quick", "--out", str(kept)]) == 0
+    with open(kept / "bench.csv", newline="") as fh:
+        kept_row = next(csv.DictReader(fh))
+    assert kept_row["energy"] == "1"
+    slots = record["runs"][0]["layout"]["slots"]
+    extra = float(kept_row["field_bytes_per_block"]) - float(row["field_bytes_per_block"])
+    bodies_per_block = int(row["bodies"]) / int(row["blocks"])
+    per_body = (len(BodyEnergy) + 2 * slots) * 8
+    assert extra == pytest.approx(bodies_per_block * per_body, rel=0.01)
 
 
 def test_random_box_is_as_dense_as_asked_and_nothing_overlaps():

@@ -68,6 +68,18 @@ def actual_arch() -> str | None:
     return _actual
 
 
+def cpu_threads() -> int:
+    """The CPU threads Taichi runs its parallel loops on (every core unless told; the
+    machine's count before ``init``)."""
+    if _current is not None:
+        from taichi.lang import impl
+
+        threads = impl.current_cfg().cpu_max_num_threads
+        if threads:
+            return int(threads)
+    return os.cpu_count() or 1
+
+
 def _running_arch() -> str:
     from taichi.lang import impl
 

@@ -41,18 +41,37 @@ STAGES = {
     "stepper": WorldStepper,
 }
 
-# "auto" on the CPU steps worlds of up to this many bodies one thread per world (many steps
-# per launch), larger ones in parallel over bodies. Measured on the 2-core VM, random box of
-# the paper's diamonds, no budget, engine of 11bff1f: one world, a thread per world is 3.8x
-# as fast as the parallel step at 300 blocks (6-6.8 M body-steps/s against 1.6-1.8 M),
-# 1.2-1.3x at 1e3, about equal at 2e3, 0.8x at 3e3 and 0.5-0.7x at 1e4; two worlds of 3e3
-# blocks 1.1-1.7x, of 1e4 0.8-1.2x. So a lone world of 2e3-4e3 bodies is stepped up to 1.25x
-# slower than it could be; a batch of at least as many worlds as threads is not.
+# "auto" on the CPU steps worlds of up to PER_WORLD_MAX_BODIES bodies one thread per world
+# (many steps per launch), larger ones in parallel over bodies; and with fewer worlds than
+# CPU threads, which would leave threads idle, only worlds of up to FEW_WORLDS_MAX_BODIES.
+# Measured on the 2-core VM, random box of the paper's diamonds, no budget, engine of
+# 11bff1f: one world, a thread per world is 3.8x as fast as the parallel step at 300 blocks
+# (6-6.8 M body-steps/s against 1.6-1.8 M), 1.2-1.3x at 1e3, about equal at 2e3, 0.8x at
+# 3e3 and 0.5-0.7x at 1e4; two worlds of 3e3 blocks 1.1-1.7x, of 1e4 0.8-1.2x.
 PER_WORLD_MAX_BODIES = 4000
+FEW_WORLDS_MAX_BODIES = 2000
 # On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
 GPU_MIN_WORLDS = 1024
 STEPPINGS = ("auto", "worlds", "bodies")
+
+
+def auto_stepping(largest: int, n_worlds: int, arch: str | None, threads: int) -> str:
+    """What ``stepping="auto"`` picks: ``"worlds"`` (a thread per world) or ``"bodies"``.
+
+    Args:
+        largest: bodies of the largest world.
+        n_worlds: worlds of the batch.
+        arch: the arch Taichi was started on (``backend.current_arch()``; None: not yet).
+        threads: CPU threads Taichi runs on.
+    """
+    if largest > PER_WORLD_MAX_BODIES:
+        return "bodies"
+    if arch not in (None, "cpu"):
+        return "worlds" if n_worlds >= GPU_MIN_WORLDS else "bodies"
+    if n_worlds < threads and largest > FEW_WORLDS_MAX_BODIES:
+        return "bodies"
+    return "worlds"
 
 
 class World:
@@ -71,8 +90,9 @@ class World:
             that ask for no energy (benchmarks, fields where only the motion is wanted).
         stepping: "worlds" (one thread per world, many steps per launch: small worlds),
             "bodies" (parallel over bodies, two launches per step: large worlds) or
-            "auto" (worlds if no world has more than ``PER_WORLD_MAX_BODIES`` bodies, and on
-            a GPU only for ``GPU_MIN_WORLDS`` worlds or more).
+            "auto" (``auto_stepping``: worlds if no world has more than
+            ``PER_WORLD_MAX_BODIES`` bodies, ``FEW_WORLDS_MAX_BODIES`` when there are fewer
+            worlds than CPU threads, and on a GPU only for ``GPU_MIN_WORLDS`` worlds or more).
     """
 
     def __init__(
@@ -101,11 +121,12 @@ class World:
         self.data.time_step[None] = self.dt
 
         if stepping == "auto":
-            largest = int(np.diff(self.host.world_body_start).max(initial=0))
-            small = largest <= PER_WORLD_MAX_BODIES
-            if backend.current_arch() not in (None, "cpu"):
-                small = small and len(self.scenes) >= GPU_MIN_WORLDS
-            stepping = "worlds" if small else "bodies"
+            stepping = auto_stepping(
+                int(np.diff(self.host.world_body_start).max(initial=0)),
+                len(self.scenes),
+                backend.current_arch(),
+                backend.cpu_threads(),
+            )
         self.stepping = stepping
 
         self.hash = SpatialHash(self.layout, self.model, self.data)
@@ -388,4 +409,4 @@ def _layout_difference(have, want) -> str:
     return ", ".join(diff)
 
 
-__all__ = ["STAGES", "World"]
+__all__ = ["STAGES", "World", "auto_stepping"]

@@ -36,7 +36,13 @@ from taichi_ice.reference import (
 )
 from taichi_ice.scenario import scene_from_dict
 from taichi_ice.studies.collision_ode import clamped_oscillator
-from taichi_ice.world import World
+from taichi_ice.world import (
+    FEW_WORLDS_MAX_BODIES,
+    GPU_MIN_WORLDS,
+    PER_WORLD_MAX_BODIES,
+    World,
+    auto_stepping,
+)
 
 # The kernels and the NumPy twin do the same float64 operations in the same order; a force
 # that round-off moves across a 2^-24 N fixed-point step changes a velocity by
@@ -608,6 +614,20 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law):
         (by_bodies.contact_counts(), by_worlds.contact_counts()),
     ):
         np.testing.assert_array_equal(a, b)
+
+
+def test_auto_stepping_leaves_no_thread_idle_for_a_lone_large_world():
+    """The rule measured on 2 cores (world.py): a thread per world up to 4,000 bodies when
+    every thread has a world, up to 2,000 when some thread would idle; on a GPU only for
+    many worlds. (Both steppings give the same state bit for bit; this is speed only.)"""
+    assert auto_stepping(300, 1, "cpu", 2) == "worlds"
+    assert auto_stepping(FEW_WORLDS_MAX_BODIES, 1, "cpu", 2) == "worlds"
+    assert auto_stepping(FEW_WORLDS_MAX_BODIES + 1, 1, "cpu", 2) == "bodies"
+    assert auto_stepping(3000, 2, "cpu", 2) == "worlds"
+    assert auto_stepping(3000, 1, "cpu", 1) == "worlds"
+    assert auto_stepping(PER_WORLD_MAX_BODIES + 1, 64, "cpu", 2) == "bodies"
+    assert auto_stepping(100, 17, "cuda", 2) == "bodies"
+    assert auto_stepping(100, GPU_MIN_WORLDS, "cuda", 2) == "worlds"
 
 
 @pytest.mark.parametrize("stepping", ["worlds", "bodies"])

@@ -497,12 +497,13 @@ class ContactStage(Stage):
         step overwrites: only the owner's thread touches them, so one buffer suffices), and
         its count."""
         d, k = ti.static((self.data, self.layout.slots))
-        k_e = ti.static(k if self.layout.energy else 1)
+        # (Slot count, not the contact stiffness: one element when no budget is kept.)
+        k_budget = ti.static(k if self.layout.energy else 1)
         old = ti.Struct(
             partner=ti.Vector.zero(ti.i32, k),
             xi=ti.Vector.zero(self.layout.real, k),
-            elastic=ti.Vector.zero(self.layout.real, k_e),
-            spring=ti.Vector.zero(self.layout.real, k_e),
+            elastic=ti.Vector.zero(self.layout.real, k_budget),
+            spring=ti.Vector.zero(self.layout.real, k_budget),
             theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
             crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
         )

@@ -144,6 +144,7 @@ def assemble(
         coulomb=coulomb,
         rate_state=not coulomb,
         water=first.water is not None,
+        force_ext=bool(np.any(np.asarray(arrays["body_force_ext"]) != 0.0)),
         theta_method=int(ThetaMethod.from_label(methods.pop()))
         if methods
         else int(ThetaMethod.EXPONENTIAL),
@@ -163,9 +164,10 @@ def assemble(
 
 
 def hash_size_for(n_small: int) -> int:
-    """Buckets of the spatial hash: the smallest power of two >= 2 n_small (at least SCAN),
-    a load factor below one half."""
-    return max(SCAN, 1 << int(np.ceil(np.log2(max(2 * n_small, 2)))))
+    """Buckets of the spatial hash: the smallest power of two >= n_small (at least SCAN), a
+    load factor between one half and one. (The hash is rebuilt only with the lists, every few
+    hundred steps, so the fuller table's extra bucket collisions cost little.)"""
+    return max(SCAN, 1 << int(np.ceil(np.log2(max(n_small, 2)))))
 
 
 def _check_shared(scenes: tuple) -> None:

@@ -54,20 +54,11 @@ class SpatialHash(Fields, Stage):
                 "body_small",
                 "body_world",
                 "body_pos",
-                "body_cell",
                 "bucket_count",
-                "bucket_start",
-                "bucket_fill",
+                "bucket_end",
                 "block_total",
             ),
-            writes=(
-                "bucket_count",
-                "bucket_fill",
-                "body_cell",
-                "bucket_start",
-                "block_total",
-                "sorted_ids",
-            ),
+            writes=("bucket_count", "bucket_end", "block_total", "sorted_ids"),
         )
     }
 
@@ -88,21 +79,23 @@ class SpatialHash(Fields, Stage):
 
     @ti.kernel
     def build(self):
-        """Count, scan and fill the buckets from the current body positions."""
+        """Count, scan and fill the buckets from the current body positions.
+
+        The scan writes each bucket's start to ``bucket_end`` and the fill advances it, so
+        a bucket's entries end up at ``[bucket_end - bucket_count, bucket_end)``: no cursor
+        field, no stored cell (``cell_of`` the position again is cheaper than 8 B a body)."""
         m, d = ti.static((self.model, self.data))
         for b in self.bucket_count:
             self.bucket_count[b] = 0
-            self.bucket_fill[b] = 0
         for i in range(self.layout.n_bodies):
             if m.body_small[i]:
-                c = self.cell_of(d.body_pos[i])
-                self.body_cell[i] = c
-                ti.atomic_add(self.bucket_count[bucket_of(c, m.body_world[i], self.mask)], 1)
+                b = bucket_of(self.cell_of(d.body_pos[i]), m.body_world[i], self.mask)
+                ti.atomic_add(self.bucket_count[b], 1)
         # Two-level exclusive scan: block-local sums in parallel, block offsets serially.
         for blk in range(self.n_blocks):
             running = 0
             for k in range(blk * SCAN, ti.min((blk + 1) * SCAN, self.mask + 1)):
-                self.bucket_start[k] = running
+                self.bucket_end[k] = running
                 running += self.bucket_count[k]
             self.block_total[blk] = running
         ti.loop_config(serialize=True)
@@ -112,11 +105,11 @@ class SpatialHash(Fields, Stage):
         for k in range(self.mask + 1):
             blk = k // SCAN
             if blk > 0:
-                self.bucket_start[k] += self.block_total[blk - 1]
+                self.bucket_end[k] += self.block_total[blk - 1]
         for i in range(self.layout.n_bodies):
             if m.body_small[i]:
-                b = bucket_of(self.body_cell[i], m.body_world[i], self.mask)
-                self.sorted_ids[self.bucket_start[b] + ti.atomic_add(self.bucket_fill[b], 1)] = i
+                b = bucket_of(self.cell_of(d.body_pos[i]), m.body_world[i], self.mask)
+                self.sorted_ids[ti.atomic_add(self.bucket_end[b], 1)] = i
 
 
 class NeighbourList(Fields):

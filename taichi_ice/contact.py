@@ -245,8 +245,7 @@ class ContactStage(Stage):
                 "body_vert_count",
                 "world_large_start",
                 "large_ids",
-                "body_cell",
-                "bucket_start",
+                "bucket_end",
                 "bucket_count",
                 "sorted_ids",
                 "body_pos",
@@ -618,23 +617,21 @@ class ContactStage(Stage):
     def build_list_hashed(self, i):
         """Body i's neighbour list from the 3 x 3 cells of the spatial hash around it and the
         large bodies of its world, sorted ascending: the same list as ``build_list``."""
-        m, h, nb = ti.static((self.model, self.hash, self.neighbours))
+        m, d, h, nb = ti.static((self.model, self.data, self.hash, self.neighbours))
         w = m.body_world[i]
         n = 0
         if m.body_small[i]:
-            c = h.body_cell[i]
+            c = h.cell_of(d.body_pos[i])
             for k in range(9):
                 cell = c + ti.Vector([k % 3 - 1, k // 3 - 1])
                 b = bucket_of(cell, w, h.mask)
-                for e in range(h.bucket_start[b], h.bucket_start[b] + h.bucket_count[b]):
+                for e in range(h.bucket_end[b] - h.bucket_count[b], h.bucket_end[b]):
                     j = h.sorted_ids[e]
                     # A bucket may hold other cells or worlds: keep only this cell's bodies.
-                    if (
-                        m.body_world[j] == w
-                        and h.body_cell[j][0] == cell[0]
-                        and h.body_cell[j][1] == cell[1]
-                    ):
-                        n = self.list_add(i, j, n)
+                    if m.body_world[j] == w:
+                        cj = h.cell_of(d.body_pos[j])
+                        if cj[0] == cell[0] and cj[1] == cell[1]:
+                            n = self.list_add(i, j, n)
         for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
             n = self.list_add(i, m.large_ids[g], n)
         # Ascending ids (insertion sort of a few entries).

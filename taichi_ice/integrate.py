@@ -154,7 +154,9 @@ class Integrator(Stage):
         kind = m.body_kind[i]
         if kind == BodyKind.DYNAMIC:
             v0, w0 = d.body_vel[i], d.body_omega[i]
-            f_ext = m.body_force_ext[i]
+            f_ext = ti.Vector([0.0, 0.0], self.layout.real)
+            if ti.static(self.layout.force_ext):
+                f_ext = m.body_force_ext[i]
             f_drag = ti.Vector([0.0, 0.0], self.layout.real)
             t_drag = ti.cast(0.0, self.layout.real)
             if ti.static(self.layout.water):
@@ -169,8 +171,9 @@ class Integrator(Stage):
                 d.body_energy[i, BodyEnergy.DRAG] = e_d + ti.cast(
                     -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
                 )
-                e_w = d.body_energy[i, BodyEnergy.WORK]
-                d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
+                if ti.static(self.layout.force_ext):
+                    e_w = d.body_energy[i, BodyEnergy.WORK]
+                    d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
             d.body_vel[i] = v1
             d.body_omega[i] = w1
             d.body_pos[i] = d.body_pos[i] + ti.cast(dt * v1, ti.f64)

@@ -337,7 +337,7 @@ class ReferenceModel:
             mass=host.body_mass,
             inertia=host.body_inertia,
             vertices=tuple(host.vert_local[a : a + n] for a, n in zip(start, count)),
-            force_ext=host.body_force_ext,
+            force_ext=host.body_force_ext if layout.force_ext else np.zeros((layout.n_bodies, 2)),
             drag=np.stack([host.body_drag_linear, host.body_drag_rotational], axis=1)
             if layout.water
             else None,

@@ -179,7 +179,7 @@ MODEL: tuple[Var, ...] = (
     Var("body_vert_start", "i32", ("n_bodies",), "id", "first vertex of the body in vert_turned", init=HOST),
     Var("body_local_start", "i32", ("n_bodies",), "id", "first vertex of the body's unturned outline in vert_local (shared by bodies of one shape)", init=HOST),
     Var("body_vert_count", "i32", ("n_bodies",), "", "vertices of the body (<= max_verts)", init=HOST),
-    Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, init=HOST),
+    Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, when="force_ext", init=HOST),
     Var("body_drag_linear", "real", ("n_bodies",), "kg/m", "quadratic water drag on translation", when="water", init=HOST),
     Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation", when="water", init=HOST),
     Var("body_probe", "i32", ("n_bodies",), "id", "probe index of the body, -1 if none", init=HOST),
@@ -215,11 +215,9 @@ DATA: tuple[Var, ...] = (
 # The spatial hash of the parallel step, rebuilt with its neighbour lists (broadphase.SpatialHash).
 HASH: tuple[Var, ...] = (
     Var("bucket_count", "i32", ("hash_size",), "", "bodies in each bucket this step"),
-    Var("bucket_start", "i32", ("hash_size",), "id", "first entry of each bucket in sorted_ids"),
-    Var("bucket_fill", "i32", ("hash_size",), "", "scatter cursor while filling"),
+    Var("bucket_end", "i32", ("hash_size",), "id", "one past the last entry of each bucket in sorted_ids (its start while filling)"),
     Var("block_total", "i32", ("scan_blocks",), "", "per-block totals of the two-level scan"),
     Var("sorted_ids", "i32", ("n_small",), "id", "small body ids, grouped by bucket"),
-    Var("body_cell", "i32", ("n_bodies",), "id", "integer cell of each small body", lanes=2),
 )
 
 # Neighbour lists with a skin (broadphase.NeighbourList), rebuilt when a body has moved half
@@ -279,6 +277,8 @@ class Layout:
             rate-and-state columns for every world (``friction.contact_row``: the
             rate-and-state laws, and Coulomb worlds as A = B = 0).
         water: water drag is compiled in.
+        force_ext: some body has a constant external force (``body_force_ext``); without
+            one the field is not allocated (16 B a body at f64) and the step adds none.
         theta_method: ``codes.ThetaMethod`` of the state variable (one per batch).
         contact_stiffness: ``k_e``, N/m per m of contact width (shared by the batch).
         contact_viscosity: ``k_v``, Pa s per m of contact width.
@@ -321,6 +321,7 @@ class Layout:
     runaway_speed: float
     precision: str = "f64"
     energy: bool = True
+    force_ext: bool = True
     nbr_len: int = 1
     skin: float = 0.0
 

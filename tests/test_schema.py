@@ -47,15 +47,15 @@ def test_fields_touched_tells_reads_from_writes():
             d = self.data
             d.body_pos[0] = d.body_vel[1]
             d.body_angle[0] += 1.0
-            d.sorted_ids[d.bucket_start[0] + ti.atomic_add(d.bucket_fill[0], 1)] = 0
+            d.sorted_ids[d.block_total[0] + ti.atomic_add(d.bucket_end[0], 1)] = 0
             self.helper()
 
         def helper(self):
             self.data.status[0] = self.data.time_step[None]
 
     reads, writes = schema.fields_touched(Probe, "kernel")
-    assert writes == {"body_pos", "body_angle", "sorted_ids", "bucket_fill", "status"}
-    assert reads == {"body_vel", "body_angle", "bucket_start", "bucket_fill", "time_step"}
+    assert writes == {"body_pos", "body_angle", "sorted_ids", "bucket_end", "status"}
+    assert reads == {"body_vel", "body_angle", "block_total", "bucket_end", "time_step"}
 
 
 @pytest.fixture(scope="module")
@@ -113,7 +113,7 @@ def test_traffic_model_counts_the_integrator_by_hand():
     and torque, 6 energy terms, the outline and what the lists' staleness needs; writes back
     the same minus the model, plus the turned outline, the status and the stale flags."""
     batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
-    layout = batch.layout.replace(n_bodies=1000, n_probes=0, water=False)
+    layout = batch.layout.replace(n_bodies=1000, n_probes=0, water=False, force_ext=True)
     n = layout.n_bodies
     # reads: probe, kind (i32); force_ext (2 x f64); inv_mass, inv_inertia (f64); force_q
     # (2 x i64), torque_q (i64); vel (2 x f64), omega, pos (2 x f64), angle (f64); energy

@@ -40,10 +40,6 @@ class Integrator(Stage):
                 "body_drag_rotational",
                 "body_inv_mass",
                 "body_inv_inertia",
-                "body_vert_start",
-                "body_local_start",
-                "body_vert_count",
-                "vert_local",
                 # Data in
                 "time_step",
                 "body_force_q",
@@ -71,21 +67,12 @@ class Integrator(Stage):
                 "body_angle",
                 "body_energy",
                 "status",
-                "vert_turned",
+                "body_rot",
                 "world_nbr_stale",
                 "nbr_rebuild",
             ),
         ),
-        "orient": Access(
-            reads=(
-                "body_angle",
-                "body_vert_start",
-                "body_local_start",
-                "body_vert_count",
-                "vert_local",
-            ),
-            writes=("vert_turned",),
-        ),
+        "orient": Access(reads=("body_angle",), writes=("body_rot",)),
     }
 
     def __init__(self, layout: Layout, model: Model, data: Data, neighbours):
@@ -97,20 +84,17 @@ class Integrator(Stage):
 
     @ti.kernel
     def orient(self):
-        """Turn every body's outline to its angle (``vert_turned``): once at set-up; the
-        step turns the bodies that move."""
+        """Turn every body to its angle (``body_rot``): once at set-up; the step turns the
+        bodies that move."""
         for i in range(self.layout.n_bodies):
             self.turn(i)
 
     @ti.func
     def turn(self, i):
-        """Body i's outline turned to its angle, relative to its centroid."""
-        m, d = ti.static((self.model, self.data))
-        c, s = ti.cos(d.body_angle[i]), ti.sin(d.body_angle[i])
-        start, local = m.body_vert_start[i], m.body_local_start[i]
-        for k in range(m.body_vert_count[i]):
-            v = m.vert_local[local + k]
-            d.vert_turned[start + k] = ti.Vector([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+        """Body i's rotation (cos, sin of its angle), from which the contact stage turns its
+        outline: two numbers a body, not two a vertex, and one cos and sin a step either way."""
+        angle = self.data.body_angle[i]
+        self.data.body_rot[i] = ti.Vector([ti.cos(angle), ti.sin(angle)])
 
     @ti.kernel
     def advance(self):

@@ -12,7 +12,6 @@ Shapes are tuples of symbols that ``Layout.size`` resolves (MuJoCo Warp's conven
 symbol     meaning
 ========== ===============================================================================
 n_bodies   N, every body of every world, world-major
-n_verts    V, vertices of every body's outline
 n_local_verts  vertices of the distinct unturned outlines (bodies of one shape share one)
 n_worlds   W, worlds of the batch; ``world_edges`` = W + 1
 n_probes   P, probe bodies (their contact force is recorded)
@@ -176,7 +175,6 @@ MODEL: tuple[Var, ...] = (
     Var("body_mass", "real", ("n_bodies",), "kg", "mass, for the kinetic energy", role="diagnostic", init=HOST),
     Var("body_inertia", "real", ("n_bodies",), "kg m^2", "moment of inertia about the centroid", role="diagnostic", init=HOST),
     Var("body_radius", "real", ("n_bodies",), "m", "circumradius about the centroid", init=HOST),
-    Var("body_vert_start", "i32", ("n_bodies",), "id", "first vertex of the body in vert_turned", init=HOST),
     Var("body_local_start", "i32", ("n_bodies",), "id", "first vertex of the body's unturned outline in vert_local (shared by bodies of one shape)", init=HOST),
     Var("body_vert_count", "i32", ("n_bodies",), "", "vertices of the body (<= max_verts)", init=HOST),
     Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, when="force_ext", init=HOST),
@@ -195,7 +193,7 @@ DATA: tuple[Var, ...] = (
     Var("body_angle", "real", ("n_bodies",), "rad", "orientation, counter-clockwise", init=HOST),
     Var("body_vel", "real", ("n_bodies",), "m/s", "centroid velocity", lanes=2, init=HOST),
     Var("body_omega", "real", ("n_bodies",), "rad/s", "angular velocity", init=HOST),
-    Var("vert_turned", "real", ("n_verts",), "m", "outline turned to the body's angle, relative to its centroid (vert_local rotated), updated as the body turns", lanes=2),
+    Var("body_rot", "real", ("n_bodies",), "", "cos and sin of body_angle, updated as the body turns: its outline is vert_local turned by them (16 B a body at f64, where the turned outline took 16 B a vertex)", lanes=2),
     Var("body_force_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "contact force gathered this step, fixed point", lanes=2),
     Var("body_torque_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "contact torque gathered this step, fixed point"),
     Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic", when="energy"),
@@ -269,7 +267,7 @@ class Layout:
     share compiled kernels.
 
     Attributes:
-        n_bodies, n_verts, n_local_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size: sizes
+        n_bodies, n_local_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size: sizes
             (see the module table).
         max_verts: most vertices of any body (the kernels' local outline matrices).
         cell_size: edge of a hash cell (m), the diameter of the largest small body.
@@ -299,7 +297,6 @@ class Layout:
     """
 
     n_bodies: int
-    n_verts: int
     n_local_verts: int
     n_worlds: int
     n_probes: int

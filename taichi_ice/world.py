@@ -277,14 +277,16 @@ class World:
             raise CapacityError(
                 f"a body had {word[Status.SLOT_OVERFLOW]} contacts{where} at t = {time:.4g} s, "
                 f"more than its {self.layout.slots} contact slots; pass slots="
-                f"{int(word[Status.SLOT_OVERFLOW]) + 4} (Simulation/World) to allow more"
+                f"{int(word[Status.SLOT_OVERFLOW]) + 4} (Simulation/World; --slots on the "
+                "command line) to allow more"
             )
         listed = int(word[Status.LIST_OVERFLOW])
         if listed > self.layout.nbr_len:
             raise CapacityError(
                 f"a body had {listed} neighbours within the skin{where} at t = {time:.4g} s, "
                 f"more than its list of {self.layout.nbr_len}; pass slots="
-                f"{-(-listed // LIST_SLOTS) + 2} (Simulation/World) to allow more"
+                f"{-(-listed // LIST_SLOTS) + 2} (Simulation/World; --slots on the command "
+                "line) to allow more"
             )
         if word[Status.NONFINITE]:
             raise DivergenceError(

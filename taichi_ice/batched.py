@@ -10,7 +10,8 @@ random inputs, for the benchmarks, and for studies that integrate thousands of i
   that ``RateState.respond`` applies;
 - ``overlap_batch_ti``: the overlap and separating-axis functions of ``geometry`` on many
   polygon pairs (``geometry.overlap`` and friends are the NumPy twins);
-- ``contact_friction_batch_ti``: the friction of many DEM contacts (``slip``).
+- ``contact_friction_batch_ti``: the friction of many DEM contacts (``slip``);
+- ``rotation_batch_ti``: a body's rotation (``geometry.rotation_ti``) of many angles.
 
 The engine itself does not use them: its stages call the same ``_ti`` functions from their
 own kernels.
@@ -40,7 +41,7 @@ from .friction import (
     theta_step,
     theta_step_ti,
 )
-from .geometry import min_penetration_axis_ti, overlap_ti, sat_separated_ti
+from .geometry import min_penetration_axis_ti, overlap_ti, rotation_ti, sat_separated_ti
 from .slip import NEWTON_TOLERANCE, contact_friction_ti
 
 # --------------------------------------------------------------------------------------------
@@ -433,4 +434,34 @@ def contact_friction_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.nd
     out = np.zeros((inputs.shape[0], 3), dtype=real)
     if inputs.shape[0]:
         _contact_friction_kernel(inputs, codes, out, int(method), NEWTON_TOLERANCE[precision])
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Rotations of many angles
+# --------------------------------------------------------------------------------------------
+
+
+@ti.kernel
+def _rotation_kernel(angle: ti.types.ndarray(ndim=1), out: ti.types.ndarray(ndim=2)):
+    for i in range(angle.shape[0]):
+        r = rotation_ti(angle[i])
+        out[i, 0] = r[0]
+        out[i, 1] = r[1]
+
+
+def rotation_batch_ti(angle: Any) -> np.ndarray:
+    """``geometry.rotation_ti`` of N angles (rad) at once: ``(N, 2)`` rows (cos, sin).
+
+    Raises:
+        ValueError: Taichi runs in float32 (``rotation_ti`` is the float64 step's).
+    """
+    if backend.current() is None:
+        backend.init("cpu", "f64")
+    if backend.current()[1] != "f64":
+        raise ValueError("rotation_ti is for a float64 runtime; this one runs float32")
+    angle = np.ascontiguousarray(np.ravel(angle), dtype=np.float64)
+    out = np.zeros((angle.shape[0], 2))
+    if angle.shape[0]:
+        _rotation_kernel(angle, out)
     return out

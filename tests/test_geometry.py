@@ -9,7 +9,7 @@ import pytest
 import shapely
 from shapely.geometry import MultiPoint, Point, Polygon
 
-from taichi_ice.batched import overlap_batch_ti
+from taichi_ice.batched import overlap_batch_ti, rotation_batch_ti
 from taichi_ice.codes import OverlapKind
 from taichi_ice.errors import PolygonError
 from taichi_ice.geometry import (
@@ -21,6 +21,7 @@ from taichi_ice.geometry import (
     min_width,
     overlap,
     rectangle,
+    rotation,
     sat_separated,
     transform,
 )
@@ -467,3 +468,44 @@ def test_min_width_is_the_least_caliper_width(pairs):
         assert caliper - diameter * np.pi / 2e5 <= min_width(p) <= caliper + 1e-12
     assert min_width(diamond(0.7, 1.0)) == pytest.approx(0.7 * 1.0 / np.hypot(0.7, 1.0), rel=1e-14)
     assert min_width(rectangle(5.5, 0.4)) == pytest.approx(0.4, rel=1e-14)
+
+
+# libm's cos and sin are within half an ulp; the rotation's reduction and polynomials add at
+# most as much again: one ulp of 1 (2.2e-16) in absolute terms, where |cos|, |sin| <= 1.
+ROTATION_ATOL = 2.3e-16
+
+
+def _angles() -> np.ndarray:
+    """Seeded angles (rad): one turn, spinning bodies' thousands of turns, past the exact
+    reduction (the libm fallback), and the multiples of pi/4 where the quadrants meet."""
+    rng = np.random.default_rng(SEED)
+    return np.concatenate(
+        [
+            rng.uniform(-4.0, 4.0, 20000),
+            rng.uniform(-1e5, 1e5, 20000),
+            rng.uniform(-1e7, 1e7, 200),
+            np.arange(-40, 41) * (np.pi / 4),
+            [0.0, -0.0, 1e-300, -1e-300],
+        ]
+    )
+
+
+def test_rotation_matches_libm_cos_and_sin():
+    """The step's cos and sin (fdlibm's reduction and polynomials) are libm's to an ulp of 1."""
+    x = _angles()
+    c, s = rotation(x)
+    np.testing.assert_allclose(c, np.cos(x), rtol=0, atol=ROTATION_ATOL)
+    np.testing.assert_allclose(s, np.sin(x), rtol=0, atol=ROTATION_ATOL)
+    # A rotation: unit length to round-off.
+    np.testing.assert_allclose(np.hypot(c, s), 1.0, rtol=0, atol=4 * ROTATION_ATOL)
+
+
+def test_taichi_rotation_equals_its_numpy_twin_bit_for_bit(taichi_runtime):
+    """rotation_ti evaluates the same operations as rotation: the same bits."""
+    if taichi_runtime[1] != "f64":
+        pytest.skip("rotation_ti is the float64 step's (float32 uses ti.cos and ti.sin)")
+    x = _angles()
+    got = rotation_batch_ti(x)
+    c, s = rotation(x)
+    np.testing.assert_array_equal(got[:, 0], c)
+    np.testing.assert_array_equal(got[:, 1], s)

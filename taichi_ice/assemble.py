@@ -304,6 +304,13 @@ def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
         local_start[i] = shapes[key]
     out["body_local_start"] = local_start
     out["vert_local"] = np.concatenate(distinct) if distinct else np.zeros((0, 2))
+    # Their edges' outward unit normals, which the contact stage turns with the body instead
+    # of normalising its turned edges every step (a square root and a division each).
+    out["vert_normal_local"] = (
+        np.concatenate([geometry.edge_normals(v) for v in distinct])
+        if distinct
+        else np.zeros((0, 2))
+    )
     sizes = {
         "n_bodies": n,
         "n_local_verts": n_local,

@@ -50,7 +50,7 @@ import taichi as ti
 
 from .broadphase import bucket_of
 from .codes import BodyEnergy, BodyKind, Status
-from .geometry import edge_normals_ti, overlap_normals_ti
+from .geometry import overlap_normals_ti
 from .schema import Access, Layout, Stage
 from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction_ti
 from .state import FORCE_QUANTUM, Data, Model
@@ -180,6 +180,7 @@ class ContactStage(Stage):
                 "body_local_start",
                 "body_vert_count",
                 "vert_local",
+                "vert_normal_local",
                 "world_mu",
                 "world_A",
                 "world_B",
@@ -305,6 +306,23 @@ class ContactStage(Stage):
                 p[k, 0] = x[0] + (c * v[0] - s * v[1])
                 p[k, 1] = x[1] + (s * v[0] + c * v[1])
         return p, count
+
+    @ti.func
+    def normals(self, i):
+        """Outward unit normals of body i's edges in a (MAXV, 2) matrix: its shape's
+        (``vert_normal_local``) turned by its rotation, as ``outline`` turns the vertices
+        (``geometry.edge_normals_ti`` of the outline, without a square root an edge)."""
+        m, d = ti.static((self.model, self.data))
+        n = ti.Matrix.zero(self.layout.real, self.maxv, 2)
+        rot = d.body_rot[i]
+        c, s = rot[0], rot[1]
+        start, count = m.body_local_start[i], m.body_vert_count[i]
+        for k in ti.static(range(self.maxv)):
+            if k < count:
+                v = m.vert_normal_local[start + k]
+                n[k, 0] = c * v[0] - s * v[1]
+                n[k, 1] = s * v[0] + c * v[1]
+        return n
 
     @ti.func
     def add_force(self, i, force, torque, serial: ti.template()):
@@ -536,7 +554,7 @@ class ContactStage(Stage):
         used = 0
         # The owner's outline and its edges' normals once for all its candidates.
         p, n_p = self.outline(i, d.body_pos[i])
-        p_normals = edge_normals_ti(p, n_p)
+        p_normals = self.normals(i)
         # What the stick springs of the last step's contacts held, less what carries on:
         # the springs of the contacts that ended (``BodyEnergy.SEVERED``).
         severed = ti.cast(0.0, ti.f64)

@@ -267,6 +267,16 @@ def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
 
 
+def edge_normals(p: np.ndarray) -> np.ndarray:
+    """``(n, 2)`` outward unit normals of the edges of a counter-clockwise polygon ``p``; edge
+    k runs from vertex k to vertex k + 1 (the NumPy twin of :func:`edge_normals_ti`)."""
+    p = np.asarray(p, dtype=np.float64)
+    edges = np.roll(p, -1, axis=0) - p
+    # Outward normal of a counter-clockwise edge (ex, ey) is (ey, -ex).
+    normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)
+    return normals / np.hypot(normals[:, 0], normals[:, 1])[:, None]
+
+
 def min_penetration_axis(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarray]:
     """Separating-axis query over the edge normals of both convex polygons.
 
@@ -292,10 +302,7 @@ def min_penetration_axis(p: np.ndarray, q: np.ndarray) -> tuple[float, np.ndarra
     best_depth = np.inf
     best_axis = np.zeros(2)
     for own, other, sign in ((p, q, 1.0), (q, p, -1.0)):
-        edges = np.roll(own, -1, axis=0) - own
-        # Outward normal of a counter-clockwise edge (ex, ey) is (ey, -ex).
-        normals = np.stack([edges[:, 1], -edges[:, 0]], axis=1)
-        normals /= np.hypot(normals[:, 0], normals[:, 1])[:, None]
+        normals = edge_normals(own)
         # rel[k, j] = n_k . (other_j - own_k)
         rel = np.einsum("kd,kjd->kj", normals, other[None, :, :] - own[:, None, :])
         depths = -rel.min(axis=1)

@@ -182,6 +182,7 @@ MODEL: tuple[Var, ...] = (
     Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation", when="water", init=HOST),
     Var("body_probe", "i32", ("n_bodies",), "id", "probe index of the body, -1 if none", init=HOST),
     Var("vert_local", "real", ("n_local_verts",), "m", "distinct outlines relative to the centroid, unrotated", lanes=2, init=HOST),
+    Var("vert_normal_local", "real", ("n_local_verts",), "", "outward unit normal of the edge from each vertex of vert_local to the next, unrotated", lanes=2, init=HOST),
     Var("world_body_start", "i32", ("world_edges",), "id", "first body of each world (bodies are world-major)", role="cold", init=HOST),
     Var("large_ids", "i32", ("n_large",), "id", "large bodies, world by world", role="cold", init=HOST),
     Var("world_large_start", "i32", ("world_edges",), "id", "first large body of each world in large_ids", role="cold", init=HOST),

@@ -80,6 +80,7 @@ class WorldStepper(Stage):
                 "status",
                 "time_step",
                 "vert_local",
+                "vert_normal_local",
                 "world_A",
                 "world_B",
                 "world_body_start",

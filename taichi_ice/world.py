@@ -44,12 +44,16 @@ STAGES = {
 # "auto" on the CPU steps worlds of up to PER_WORLD_MAX_BODIES bodies one thread per world
 # (many steps per launch), larger ones in parallel over bodies; and with fewer worlds than
 # CPU threads, which would leave threads idle, only worlds of up to FEW_WORLDS_MAX_BODIES.
-# Measured on the 2-core VM, random box of the paper's diamonds, no budget, engine of
-# 11bff1f: one world, a thread per world is 3.8x as fast as the parallel step at 300 blocks
-# (6-6.8 M body-steps/s against 1.6-1.8 M), 1.2-1.3x at 1e3, about equal at 2e3, 0.8x at
-# 3e3 and 0.5-0.7x at 1e4; two worlds of 3e3 blocks 1.1-1.7x, of 1e4 0.8-1.2x.
+# Measured on the 2-core VM, random box of the paper's diamonds, no budget, one world, the
+# faster of 15 timings each (engine of 11bff1f): a thread per world is 3.8x as fast as the
+# parallel step at 300 blocks, 1.2-1.3x at 1e3, 0.8x at 3e3; two worlds of 3e3 blocks
+# 1.1-1.7x, of 1e4 0.8-1.2x. With the cheaper narrow phase of issue 10 (engine of dfaf61e)
+# the parallel step's fixed cost (two launches, two thread-pool tasks: ~0.25 ms) weighs
+# more: a thread per world is 3.2x as fast at 1e3, 1.9x at 2e3, 1.5x at 3e3, 1.1-1.3x at
+# 4e3, 0.9x at 5e3. A machine with more cores gains more from the parallel step, so the cut
+# for a lone world stays below the 2-core crossing.
 PER_WORLD_MAX_BODIES = 4000
-FEW_WORLDS_MAX_BODIES = 2000
+FEW_WORLDS_MAX_BODIES = 3000
 # On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
 GPU_MIN_WORLDS = 1024

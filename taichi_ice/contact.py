@@ -50,7 +50,7 @@ import taichi as ti
 
 from .broadphase import bucket_of
 from .codes import BodyEnergy, BodyKind, Status
-from .geometry import overlap_normals_ti
+from .geometry import facing_separated_ti, overlap_normals_ti
 from .schema import Access, Layout, Stage
 from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction_ti
 from .state import FORCE_QUANTUM, Data, Model
@@ -366,7 +366,20 @@ class ContactStage(Stage):
         m, d = ti.static((self.model, self.data))
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
         q, n_q = self.outline(j, xi_)
-        area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
+        # Most candidates (bounding circles that meet) do not touch, and one of the two
+        # edges that face each other separates 99 % of those (random box of 1e4 diamonds):
+        # try them before the full separating-axis test and the clip. (-14 % of a step's
+        # CPU time there; the jammed pillar scene's step the same.)
+        toward = ti.cast(xj_ - xi_, self.layout.real)
+        separated = facing_separated_ti(p, p_normals, n_p, q, n_q, toward)
+        if not separated:
+            separated = facing_separated_ti(q, self.normals(j), n_q, p, n_p, -toward)
+        area = 0.0
+        point = ti.math.vec2(0.0, 0.0)
+        normal = ti.math.vec2(0.0, 0.0)
+        width = 0.0
+        if not separated:
+            area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
         if area > 0.0:
             # point is relative to body i
             r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)

@@ -293,36 +293,38 @@ class ContactStage(Stage):
         sin): four multiply-adds a vertex instead of a turned outline stored per body.
         """
         m, d = ti.static((self.model, self.data))
-        p = ti.Matrix.zero(self.layout.real, self.maxv, 2)
         x = ti.cast(d.body_pos[i] - origin, self.layout.real)  # positions are f64
-        rot = d.body_rot[i]
-        c, s = rot[0], rot[1]
-        start, count = m.body_local_start[i], m.body_vert_count[i]
-        # Unrolled to the largest outline, so that the matrix's indices are constants
-        # (geometry._min_penetration_axis_ti says why).
-        for k in ti.static(range(self.maxv)):
-            if k < count:
-                v = m.vert_local[start + k]
-                p[k, 0] = x[0] + (c * v[0] - s * v[1])
-                p[k, 1] = x[1] + (s * v[0] + c * v[1])
-        return p, count
+        return self.turned(i, m.vert_local, x, True), m.body_vert_count[i]
 
     @ti.func
     def normals(self, i):
         """Outward unit normals of body i's edges in a (MAXV, 2) matrix: its shape's
         (``vert_normal_local``) turned by its rotation, as ``outline`` turns the vertices
         (``geometry.edge_normals_ti`` of the outline, without a square root an edge)."""
+        zero = ti.Vector([0.0, 0.0], self.layout.real)
+        return self.turned(i, self.model.vert_normal_local, zero, False)
+
+    @ti.func
+    def turned(self, i, local: ti.template(), shift, shifted: ti.template()):
+        """Rows of body i's shape in ``local`` (a field of 2-vectors indexed like
+        ``vert_local``) turned by the body's rotation, plus ``shift`` if ``shifted``, in a
+        (MAXV, 2) matrix. Unrolled to the largest outline, so that the matrix's indices are
+        constants (``geometry._min_penetration_axis_ti`` says why)."""
         m, d = ti.static((self.model, self.data))
-        n = ti.Matrix.zero(self.layout.real, self.maxv, 2)
+        out = ti.Matrix.zero(self.layout.real, self.maxv, 2)
         rot = d.body_rot[i]
         c, s = rot[0], rot[1]
         start, count = m.body_local_start[i], m.body_vert_count[i]
         for k in ti.static(range(self.maxv)):
             if k < count:
-                v = m.vert_normal_local[start + k]
-                n[k, 0] = c * v[0] - s * v[1]
-                n[k, 1] = s * v[0] + c * v[1]
-        return n
+                v = local[start + k]
+                if ti.static(shifted):
+                    out[k, 0] = shift[0] + (c * v[0] - s * v[1])
+                    out[k, 1] = shift[1] + (s * v[0] + c * v[1])
+                else:
+                    out[k, 0] = c * v[0] - s * v[1]
+                    out[k, 1] = s * v[0] + c * v[1]
+        return out
 
     @ti.func
     def add_force(self, i, force, torque, serial: ti.template()):

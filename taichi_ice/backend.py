@@ -80,6 +80,19 @@ def cpu_threads() -> int:
     return os.cpu_count() or 1
 
 
+def usable_cores() -> int:
+    """Cores this process may run on: its CPU affinity, capped by a cgroup (v2) CPU quota
+    when one is set (a container's ``--cpus``); ``os.cpu_count()`` where neither is known."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 0
+    cores = cores or os.cpu_count() or 1
+    with contextlib.suppress(OSError, ValueError):
+        with open("/sys/fs/cgroup/cpu.max") as fh:
+            quota, period = fh.read().split()[:2]
+        if quota != "max":
+            cores = min(cores, max(1, int(int(quota) // int(period))))
+    return cores
+
+
 def _running_arch() -> str:
     from taichi.lang import impl
 

@@ -1,8 +1,9 @@
-"""Many steps per kernel launch: each thread steps one world, body by body.
+"""Many steps per kernel launch: a thread per world (``WorldStepper``), or a team of threads
+over the bodies of large worlds on the CPU (``BodyTeam``).
 
 A scene of tens of blocks does less work per step than a kernel launch costs: stepping it
-with ``World.step`` (two launches and a dozen offloaded tasks per step) spends most of its
-time starting threads. ``WorldStepper.run(plan, ...)`` instead launches once for many steps
+in parallel over its bodies spends most of its time starting threads and waiting at
+barriers. ``WorldStepper.run(plan, ...)`` instead launches once for many steps
 (and the samples of the run between them, ``World.advance_sampled``);
 its one parallel loop runs over the worlds of the batch, and the thread of a world takes it
 through the ``n`` steps in turn:
@@ -184,3 +185,132 @@ class WorldStepper(Stage):
                 self.steps(w, plan[s, 0], dt)
                 if plan[s, 1] != NO_SAMPLE:
                     self.energy.sample(w, s, rows, impulses, plan[s, 1])
+
+
+@ti.data_oriented
+class BodyTeam(Stage):
+    """The parallel step on the CPU, many steps per launch: a team of threads, one task each.
+
+    Stepping in parallel over bodies with a kernel per stage (``contacts.compute``, then
+    ``integrator.advance``) pays, every step, two launches from Python and two rounds of
+    Taichi's thread pool, whose workers sleep on a condition variable between tasks: about
+    60 us a round on the 2-core VM, a fifth of a step at 1e4 blocks. ``run(n)`` launches once
+    for ``n`` steps. Its parallel loop has one iteration per thread of the team; each takes
+    the steps in turn:
+
+        for each step:   contacts of bodies in chunks claimed from a shared counter
+                         barrier
+                         advance bodies in chunks claimed from the other counter
+                         barrier
+                         stop if a body moved half the skin (lists to rebuild)
+
+    The barriers spin on an atomic counter (``barrier``) instead of sleeping: the team must
+    have a core for each of its threads (``threads``: Taichi's threads, at most the cores this
+    process may use, ``backend.usable_cores``), or a thread waits out the time slice of the
+    one it waits for. Every one of the team's iterations runs at once on its own worker: the
+    pool wakes as many workers as the loop's ``parallelize`` and a worker cannot take a second
+    iteration while its first waits at a barrier. The bodies, the contact and integration
+    code and the order of a body's candidates are those of the kernels per stage, and forces
+    are summed in fixed point, so the two give the same state bit for bit
+    (``tests/test_engine.py``). The launch returns after the step that marked lists stale;
+    ``World.advance`` rebuilds them (``refresh_lists``) and launches for the steps left.
+    """
+
+    ACCESS: ClassVar[dict[str, Access]] = {
+        "run": Access(
+            reads=tuple(
+                sorted(
+                    {
+                        *ContactStage.ACCESS["compute"].reads,
+                        *Integrator.ACCESS["advance"].reads,
+                        "nbr_rebuild",
+                    }
+                )
+            ),
+            writes=tuple(
+                sorted(
+                    {*ContactStage.ACCESS["compute"].writes, *Integrator.ACCESS["advance"].writes}
+                )
+            ),
+            per_contact=ContactStage.ACCESS["compute"].per_contact,
+        )
+    }
+    PARTS: ClassVar[dict[str, type]] = {"contacts": ContactStage, "integrator": Integrator}
+    # Bodies a thread claims at a time: enough that claims are rare, few enough that the
+    # threads finish a stage together (1e4 bodies: 157 chunks for 2 threads).
+    CHUNK = 64
+
+    def __init__(
+        self,
+        layout: Layout,
+        data: Data,
+        neighbours: NeighbourList,
+        contacts: ContactStage,
+        integrator: Integrator,
+        threads: int,
+    ):
+        self.layout, self.data, self.neighbours = layout, data, neighbours
+        self.contacts, self.integrator = contacts, integrator
+        self.threads = int(threads)
+        # The team's synchronisation words, reset at the start of every launch (scratch of
+        # one launch, no state of the batch: not in the schema). ``arrived``: arrivals at
+        # the barriers so far; ``claimed``: chunks claimed in each stage of the step;
+        # ``done``: steps taken when the launch stops early.
+        self.arrived = ti.field(ti.i32, ())
+        self.claimed = ti.field(ti.i32, 2)
+        self.done = ti.field(ti.i32, ())
+
+    @ti.func
+    def barrier(self, k):
+        """The ``k``-th barrier of the launch: wait until every thread has arrived at it.
+        (An atomic add of 0 reads the counter: a plain load could be hoisted out of the
+        loop, and the atomics order the stage's stores before the arrival.)"""
+        ti.atomic_add(self.arrived[None], 1)
+        while ti.atomic_add(self.arrived[None], 0) < k * self.threads:
+            pass
+
+    @ti.func
+    def chunk(self, stage):
+        """The first body of the next unclaimed chunk of ``stage`` (0: contacts, 1: the
+        integrator), ``n_bodies`` or more when all are claimed."""
+        return ti.atomic_add(self.claimed[stage], 1) * self.CHUNK
+
+    @ti.kernel
+    def run(self, n: ti.i32) -> ti.i32:
+        """``n`` steps of every body, fewer if a step marks the neighbour lists stale: then
+        it stops after that step. Returns the steps taken."""
+        self.arrived[None] = 0
+        self.claimed[0] = 0
+        self.claimed[1] = 0
+        self.done[None] = n
+        nb, count = ti.static((self.neighbours, self.layout.n_bodies))
+        ti.loop_config(parallelize=self.threads, block_dim=1)
+        for t in range(self.threads):
+            dt = self.data.time_step[None]
+            k = 0
+            for s in range(n):
+                first = self.chunk(0)
+                while first < count:
+                    for i in range(first, ti.min(first + self.CHUNK, count)):
+                        self.contacts.listed(i, dt, False)
+                    first = self.chunk(0)
+                if t == 0:
+                    self.claimed[1] = 0  # last used before the previous barrier
+                k += 1
+                self.barrier(k)
+                first = self.chunk(1)
+                while first < count:
+                    for i in range(first, ti.min(first + self.CHUNK, count)):
+                        self.integrator.body(i, dt)
+                    first = self.chunk(1)
+                if t == 0:
+                    self.claimed[0] = 0
+                k += 1
+                self.barrier(k)
+                # Every thread reads the same word: it is written in the integrator's stage
+                # only, which no thread enters again before the next barrier.
+                if ti.atomic_add(nb.nbr_rebuild[None], 0):
+                    if t == 0:
+                        self.done[None] = s + 1
+                    break
+        return self.done[None]

@@ -1,7 +1,7 @@
 """A batch of independent worlds and its step: the algorithm, stage by stage.
 
-Stepping in parallel over bodies (``stepping="bodies"``: large worlds), two kernel
-launches per step, whatever the number of worlds or bodies:
+Stepping in parallel over bodies (``stepping="bodies"``: large worlds), whatever the number
+of worlds or bodies:
 
     step():  refresh_lists()       only when a body has moved half the skin (read back):
                                    hash.build(), contacts.build_lists()
@@ -9,10 +9,15 @@ launches per step, whatever the number of worlds or bodies:
                                    contact memory
              integrator.advance()  forces -> velocities -> positions, work and drag
 
+On a GPU each stage is a kernel launched every step. On the CPU a team of threads runs the
+two stages for many steps in one launch, meeting at a barrier after each
+(``stepper.BodyTeam``), until a step marks the lists stale: the launches and rounds of the
+thread pool that a kernel per stage costs were a fifth of a step at 1e4 blocks.
+
 Stepping in parallel over worlds (``stepping="worlds"``: small worlds, batches of them), one
 launch for many steps (``advance(n)``; ``stepper.WorldStepper``): the thread of a world
 rebuilds its neighbour lists when a body has moved half their skin, then runs the same
-contact and integration code body by body. Both give bit-identical states.
+contact and integration code body by body. All three give bit-identical states.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from .contact import ContactStage
 from .energy import SAMPLE_COLUMNS, EnergyMeter
 from .errors import CapacityError, DivergenceError, UsageError
 from .integrate import Integrator
-from .stepper import NO_SAMPLE, WorldStepper
+from .stepper import NO_SAMPLE, BodyTeam, WorldStepper
 
 # The stages of a step, by the name their kernels are reported under (benchmarks, traffic).
 STAGES = {
@@ -39,21 +44,22 @@ STAGES = {
     "integrator": Integrator,
     "energy": EnergyMeter,
     "stepper": WorldStepper,
+    "team": BodyTeam,
 }
 
 # "auto" on the CPU steps worlds of up to PER_WORLD_MAX_BODIES bodies one thread per world
 # (many steps per launch), larger ones in parallel over bodies; and with fewer worlds than
 # CPU threads, which would leave threads idle, only worlds of up to FEW_WORLDS_MAX_BODIES.
-# Measured on the 2-core VM, random box of the paper's diamonds, no budget, one world, the
-# faster of 15 timings each (engine of 11bff1f): a thread per world is 3.8x as fast as the
-# parallel step at 300 blocks, 1.2-1.3x at 1e3, 0.8x at 3e3; two worlds of 3e3 blocks
-# 1.1-1.7x, of 1e4 0.8-1.2x. With the cheaper narrow phase of issue 10 (engine of dfaf61e)
-# the parallel step's fixed cost (two launches, two thread-pool tasks: ~0.25 ms) weighs
-# more: a thread per world is 3.2x as fast at 1e3, 1.9x at 2e3, 1.5x at 3e3, 1.1-1.3x at
-# 4e3, 0.9x at 5e3. A machine with more cores gains more from the parallel step, so the cut
-# for a lone world stays below the 2-core crossing.
-PER_WORLD_MAX_BODIES = 4000
-FEW_WORLDS_MAX_BODIES = 3000
+# Measured on the 2-core VM, random box of the paper's diamonds, no budget, the faster of
+# 9 timings, 3 pairs each, with the parallel step on the CPU as a team of threads in one
+# launch (``stepper.BodyTeam``): a lone world steps 1.3-1.5x as fast in parallel over bodies
+# as a thread per world at 300 to 3,000 blocks, 1.03-1.16x at 100, 1.2x at 200, and 0.75-0.86x
+# the pillar scene (63 blocks); two worlds step 1.3x as fast a thread each at 1,000 and 3,000
+# blocks, 2.1x at 5,000 and 1.2x at 10,000 blocks each. (Before the team, whose barriers
+# replace two launches and two rounds of the thread pool a step, a lone world crossed over
+# at 4,000 to 5,000 blocks.)
+PER_WORLD_MAX_BODIES = 10000
+FEW_WORLDS_MAX_BODIES = 100
 # On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
 GPU_MIN_WORLDS = 1024
@@ -93,7 +99,8 @@ class World:
             raises and the samples' energy columns, but the kinetic one, are NaN. For runs
             that ask for no energy (benchmarks, fields where only the motion is wanted).
         stepping: "worlds" (one thread per world, many steps per launch: small worlds),
-            "bodies" (parallel over bodies, two launches per step: large worlds) or
+            "bodies" (parallel over bodies: large worlds; on the CPU by a team of threads,
+            ``team``, many steps per launch) or
             "auto" (``auto_stepping``: worlds if no world has more than
             ``PER_WORLD_MAX_BODIES`` bodies, ``FEW_WORLDS_MAX_BODIES`` when there are fewer
             worlds than CPU threads, and on a GPU only for ``GPU_MIN_WORLDS`` worlds or more).
@@ -148,6 +155,14 @@ class World:
             self.integrator,
             self.energy,
         )
+        # The parallel step on the CPU: one launch for many steps (``BodyTeam``); None
+        # launches the two stages' kernels every step (GPU, or set to None to compare).
+        self.team = None
+        if stepping == "bodies" and backend.actual_arch() in (None, "cpu"):
+            threads = min(backend.cpu_threads(), backend.usable_cores())
+            self.team = BodyTeam(
+                self.layout, self.data, self.neighbours, self.contacts, self.integrator, threads
+            )
         # What WorldStepper.run is handed when it takes no sample (it writes nothing there).
         self._no_samples = (np.zeros((1, 1, SAMPLE_COLUMNS)), np.zeros((1, 1, 2)))
         self.steps = 0
@@ -240,6 +255,11 @@ class World:
         if self.stepping == "worlds":
             plan = np.array([[n, NO_SAMPLE]], dtype=np.int32)
             self.stepper.run(plan, *self._no_samples)
+        elif self.team is not None:
+            left = n
+            while left > 0:
+                self.refresh_lists()
+                left -= self.team.run(left)
         else:
             for _ in range(n):
                 self.refresh_lists()

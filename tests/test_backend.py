@@ -4,7 +4,8 @@ The suite compiles without Taichi's advanced passes (``conftest.py``), which is 
 faster; users' runs compile with them. This holds the two against each other bit for bit,
 in two fresh processes (Taichi's settings are per process), on both ways of stepping: a
 world a thread (the pillar scene with rate-and-state friction through its jam) and bodies in
-parallel (a box of 300 diamonds at random angles and velocities).
+parallel (a box of 300 diamonds at random angles and velocities), the latter both by a team
+of threads in one launch and by a kernel per stage and step.
 """
 
 from __future__ import annotations
@@ -40,6 +41,11 @@ w = World([scene], stepping="bodies")
 w.advance(300)
 w.check()
 print("BOX", digest(w), int(w.contact_counts().sum()))
+k = World([scene], stepping="bodies")
+k.team = None  # the parallel step's kernels launched every step, as on a GPU
+k.advance(300)
+k.check()
+print("KERNELS", digest(k))
 """
 
 
@@ -60,6 +66,9 @@ def test_optimised_and_fast_compiled_kernels_step_the_same():
     assert contacts > 20  # blocks are colliding: the narrow phase worked on many pairs
     assert fast["PILLAR"] == full["PILLAR"]
     assert fast["BOX"] == full["BOX"]
+    # The team's threads meet at barriers inside one launch (stepper.BodyTeam): compiled
+    # with every pass, they still see each other's stores as the kernels per stage do.
+    assert full["BOX"].split()[0] == full["KERNELS"] == fast["KERNELS"]
 
 
 @pytest.mark.parametrize(
@@ -72,3 +81,28 @@ def test_optimize_default_reads_the_environment(monkeypatch, value, expected):
     else:
         monkeypatch.setenv(backend.OPTIMIZE_ENV, value)
     assert backend.optimize_default() is expected
+
+
+def test_usable_cores_honours_a_cgroup_quota(monkeypatch):
+    """A container's CPU quota (cgroup v2 ``cpu.max``) caps the cores a team of spinning
+    threads may count on; "max" (no quota) leaves the affinity's count."""
+    import builtins
+    import io
+
+    real_open = builtins.open
+    quota = {"text": "150000 100000\n"}
+
+    def fake_open(path, *args, **kwargs):
+        if str(path) == "/sys/fs/cgroup/cpu.max":
+            return io.StringIO(quota["text"])
+        return real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", fake_open)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1, 2, 3}, raising=False)
+    assert backend.usable_cores() == 1
+    quota["text"] = "400000 100000\n"
+    assert backend.usable_cores() == 4
+    quota["text"] = "max 100000\n"
+    assert backend.usable_cores() == 4
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3}, raising=False)
+    assert backend.usable_cores() == 1

@@ -598,28 +598,40 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law):
     dt = min(s.dt for s in scenes)
     by_bodies = World(scenes, dt=dt, stepping="bodies")
     by_worlds = World(scenes, dt=dt, stepping="worlds")
+    # The parallel step as a GPU runs it: its two kernels launched every step (on the CPU
+    # a team of threads takes many steps per launch, ``stepper.BodyTeam``).
+    by_kernels = World(scenes, dt=dt, stepping="bodies")
+    assert by_bodies.team is not None
+    by_kernels.team = None
     start = by_worlds.positions()
     contacts = 0
     for _ in range(8):
         by_bodies.advance(50)
         by_worlds.advance(50)
+        by_kernels.advance(50)
         contacts += int(by_worlds.contact_counts().sum())
-    by_bodies.check()
-    by_worlds.check()
-    # The lists were rebuilt after some block had moved half the skin (they record where).
-    ref = by_worlds.neighbours.nbr_ref_pos.to_numpy()[: by_worlds.layout.n_bodies]
+    for world in (by_bodies, by_worlds, by_kernels):
+        world.check()
+    # The lists were rebuilt after some block had moved half the skin (they record where),
+    # at the same steps in every way of stepping: a team's launch stopped there.
+    n = by_worlds.layout.n_bodies
+    ref = by_worlds.neighbours.nbr_ref_pos.to_numpy()[:n]
     moved = np.max(np.hypot(*(ref - start).T))
     assert moved > 0.5 * by_worlds.layout.skin
     assert contacts > 0
-    assert_same_motion(by_bodies, by_worlds)
-    np.testing.assert_array_equal(by_bodies.energies(), by_worlds.energies())
+    for other in (by_bodies, by_kernels):
+        np.testing.assert_array_equal(other.neighbours.nbr_ref_pos.to_numpy()[:n], ref)
+        assert_same_motion(other, by_worlds)
+        np.testing.assert_array_equal(other.energies(), by_worlds.energies())
 
 
 def test_auto_stepping_leaves_no_thread_idle_for_a_lone_large_world():
-    """The rule measured on 2 cores (world.py): a thread per world up to 4,000 bodies when
-    every thread has a world, up to 2,000 when some thread would idle; on a GPU only for
-    many worlds. (Both steppings give the same state bit for bit; this is speed only.)"""
-    assert auto_stepping(300, 1, "cpu", 2) == "worlds"
+    """The rule measured on 2 cores (world.py): a thread per world up to 10,000 bodies when
+    every thread has a world, up to 100 (the pillar scene's 70) when some thread would idle;
+    on a GPU only for many worlds. (Both steppings give the same state bit for bit; this is
+    speed only.)"""
+    assert auto_stepping(70, 1, "cpu", 2) == "worlds"
+    assert auto_stepping(300, 1, "cpu", 2) == "bodies"
     assert auto_stepping(FEW_WORLDS_MAX_BODIES, 1, "cpu", 2) == "worlds"
     assert auto_stepping(FEW_WORLDS_MAX_BODIES + 1, 1, "cpu", 2) == "bodies"
     assert auto_stepping(3000, 2, "cpu", 2) == "worlds"

@@ -13,8 +13,9 @@ import sys
 
 __all__ = ["STEP_KERNELS", "field_bytes", "rss_bytes", "traffic"]
 
-# The kernels of a step by the World's stepping, named as their times are reported. (The
-# parallel step's hash and list rebuilds run once in hundreds of steps and are left out.)
+# The kernels of a step by the World's stepping. (The parallel step's hash and list rebuilds
+# run once in hundreds of steps and are left out. On the CPU its two stages run in one
+# launch, ``team.run``, but each step still moves what each of them reads and writes.)
 STEP_KERNELS = {
     "bodies": ("contacts.compute", "integrator.advance"),
     "worlds": ("stepper.run",),

@@ -80,6 +80,21 @@ def cpu_threads() -> int:
     return os.cpu_count() or 1
 
 
+# Trees of fields a process can hold on Taichi's CPU and CUDA backends (its LLVM runtime's
+# kMaxNumSnodeTreesLlvm); one more crashes the process.
+MAX_FIELD_TREES = 512
+
+
+def field_trees() -> int:
+    """Trees of fields Taichi holds in this process (each batch of fields declared between
+    two kernel launches is one; they are never freed), 0 before ``init``."""
+    if _current is None:
+        return 0
+    from taichi.lang import impl
+
+    return int(impl.get_runtime().prog.get_snode_tree_size())
+
+
 def usable_cores() -> int:
     """Cores this process may run on: its CPU affinity, capped by a cgroup (v2) CPU quota
     when one is set (a container's ``--cpus``); ``os.cpu_count()`` where neither is known."""

@@ -43,7 +43,7 @@ from .friction import (
 )
 from .geometry import (
     edge_normals_ti,
-    facing_separated_ti,
+    facing_gap_ti,
     min_penetration_axis_ti,
     overlap_ti,
     rotation_ti,
@@ -293,7 +293,7 @@ def _overlap_batch_kernel(
     depth_out: ti.types.ndarray(ndim=1),
     axis_out: ti.types.ndarray(ndim=2),
     separated_out: ti.types.ndarray(ndim=1),
-    facing_out: ti.types.ndarray(ndim=1),
+    gap_out: ti.types.ndarray(ndim=1),
 ):
     for b in range(area_out.shape[0]):
         # The gather the contact kernel does: vertices into fixed-size local matrices.
@@ -318,10 +318,9 @@ def _overlap_batch_kernel(
             toward += ti.math.vec2(q[k, 0], q[k, 1]) / n_q_in[b]
         for k in range(n_p_in[b]):
             toward -= ti.math.vec2(p[k, 0], p[k, 1]) / n_p_in[b]
-        facing = facing_separated_ti(
+        gap_out[b] = facing_gap_ti(
             p, edge_normals_ti(p, n_p_in[b]), n_p_in[b], q, n_q_in[b], toward
         )
-        facing_out[b] = ti.cast(facing, ti.i32)
         for d in ti.static(range(2)):
             centroid_out[b, d] = centroid[d]
             normal_out[b, d] = normal[d]
@@ -334,9 +333,9 @@ class BatchOverlap(NamedTuple):
     Attributes:
         area: ``(B,)`` m^2. centroid: ``(B, 2)`` m. normal: ``(B, 2)``. width: ``(B,)`` m.
         kind: ``(B,)`` int32. depth: ``(B,)`` SAT minimum penetration (m). axis: ``(B, 2)``
-        its unit axis, ``p -> q``. separated: ``(B,)`` bool, the SAT verdict. facing:
-        ``(B,)`` bool, :func:`geometry.facing_separated_ti` toward ``q``'s vertex mean from
-        ``p``'s.
+        its unit axis, ``p -> q``. separated: ``(B,)`` bool, the SAT verdict. facing_gap:
+        ``(B,)`` m, :func:`geometry.facing_gap_ti` toward ``q``'s vertex mean from ``p``'s.
+        facing: ``(B,)`` bool, that gap >= 0 (the facing edge separates the pair).
     """
 
     area: np.ndarray
@@ -347,6 +346,7 @@ class BatchOverlap(NamedTuple):
     depth: np.ndarray
     axis: np.ndarray
     separated: np.ndarray
+    facing_gap: np.ndarray
     facing: np.ndarray
 
 
@@ -388,11 +388,12 @@ def overlap_batch_ti(p, n_p, q, n_q) -> BatchOverlap:
         depth=np.zeros(batch, real),
         axis=np.zeros((batch, 2), real),
         separated=np.zeros(batch, np.int32),
-        facing=np.zeros(batch, np.int32),
+        facing_gap=np.zeros(batch, real),
+        facing=np.zeros(batch, bool),
     )
     if batch:
-        _overlap_batch_kernel(p, n_p, q, n_q, p.shape[1], q.shape[1], *out)
-    return out._replace(separated=out.separated.astype(bool), facing=out.facing.astype(bool))
+        _overlap_batch_kernel(p, n_p, q, n_q, p.shape[1], q.shape[1], *out[:-1])
+    return out._replace(separated=out.separated.astype(bool), facing=out.facing_gap >= 0.0)
 
 
 # --------------------------------------------------------------------------------------------

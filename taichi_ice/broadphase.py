@@ -126,6 +126,14 @@ class NeighbourList(Fields):
     they are rebuilt before its next step. The lists are scratch: a world without valid lists
     (1 at the start) rebuilds them first.
 
+    Between rebuilds most listed pairs are not even tested: a pair that the contact stage
+    found apart by a gap (a facing edge, or the bounding circles) cannot touch until the two
+    bodies have together moved that far, and each body adds up how far any of its points can
+    have moved since its list was built (``nbr_path``: centroid step plus circumradius times
+    turn, ``Integrator.displace``). The gap is kept with both paths added
+    (``nbr_gap``, ``ContactStage.gap_bound``), so one comparison a step settles the pair; it
+    skips only pairs the test would find apart, and the state is the same bit for bit.
+
     Its fields are declared in ``taichi_ice.schema`` (``NEIGHBOURS``).
     """
 

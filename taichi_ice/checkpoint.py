@@ -32,10 +32,11 @@ import numpy as np
 from . import provenance
 from .errors import RunFileError
 
-FORMAT_VERSION = "5"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "6"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
-#                       5: a body's rotation (body_rot) instead of its turned outline
+#                       5: a body's rotation (body_rot) instead of its turned outline;
+#                       6: the neighbour lists' gaps and paths (nbr_gap, nbr_path)
 SUFFIX = ".ckpt"
 
 

@@ -50,10 +50,15 @@ import taichi as ti
 
 from .broadphase import bucket_of
 from .codes import BodyEnergy, BodyKind, Status
-from .geometry import facing_separated_ti, overlap_normals_ti
+from .geometry import facing_gap_ti, overlap_normals_ti
 from .schema import Access, Layout, Stage
 from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction_ti
 from .state import FORCE_QUANTUM, Data, Model
+
+# Round-off allowance of a gap that lets a pair be skipped (``ContactStage.gap_bound``), as
+# a fraction of the two circumradii: 1e-5 m for two of the paper's diamonds, against ~1e-7 m
+# of error in a float32 outline a metre across, turned and shifted relative to the pair.
+GAP_MARGIN = 1e-5
 
 
 @ti.func
@@ -192,6 +197,8 @@ class ContactStage(Stage):
                 # Neighbour lists
                 "nbr_count",
                 "nbr_ids",
+                "nbr_path",
+                "nbr_gap",
                 # Data in
                 "time_step",
                 "body_pos",
@@ -222,6 +229,7 @@ class ContactStage(Stage):
                 "body_torque_q",
                 "body_energy",
                 "status",
+                "nbr_gap",
             ),
             per_contact=(
                 "body_vel",
@@ -266,6 +274,8 @@ class ContactStage(Stage):
                 "world_nbr_stale",
                 "nbr_rebuild",
                 "status",
+                "nbr_path",
+                "nbr_gap",
             ),
         ),
     }
@@ -364,7 +374,8 @@ class ContactStage(Stage):
         edges' outward normals ``p_normals``), and
         partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``spring``,
         ``theta``, ``crushed``: zero and ``NO_INTERFACE`` if it was not in contact). Returns
-        the owner's new slot count."""
+        the owner's new slot count, and the gap (m) by which a facing edge proved the pair
+        apart (negative if none did)."""
         m, d = ti.static((self.model, self.data))
         xi_, xj_ = d.body_pos[i], d.body_pos[j]
         q, n_q = self.outline(j, xi_)
@@ -373,9 +384,10 @@ class ContactStage(Stage):
         # try them before the full separating-axis test and the clip. (-14 % of a step's
         # CPU time there; the jammed pillar scene's step the same.)
         toward = ti.cast(xj_ - xi_, self.layout.real)
-        separated = facing_separated_ti(p, p_normals, n_p, q, n_q, toward)
-        if not separated:
-            separated = facing_separated_ti(q, self.normals(j), n_q, p, n_p, -toward)
+        gap = facing_gap_ti(p, p_normals, n_p, q, n_q, toward)
+        if gap < 0.0:
+            gap = facing_gap_ti(q, self.normals(j), n_q, p, n_p, -toward)
+        separated = gap >= 0.0
         area = 0.0
         point = ti.math.vec2(0.0, 0.0)
         normal = ti.math.vec2(0.0, 0.0)
@@ -474,7 +486,7 @@ class ContactStage(Stage):
                 if ti.static(self.layout.crushing):
                     d.contact_crushed[i, used] = crushed_new
             used += 1
-        return used
+        return used, gap
 
     @ti.func
     def owns(self, i, j):
@@ -564,7 +576,7 @@ class ContactStage(Stage):
         circles meet its own (ascending ids, so the sums of a body do not depend on how the
         list was built); the memory of the last step is read from its slots and this step's
         written over it."""
-        _m, d = ti.static((self.model, self.data))
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
         old, n_old = self.remember(i)
         used = 0
         # The owner's outline and its edges' normals once for all its candidates.
@@ -576,9 +588,20 @@ class ContactStage(Stage):
         if ti.static(self.layout.energy):
             for s in range(n_old):
                 severed += ti.cast(old.spring[s], ti.f64)
-        for k in range(self.neighbours.nbr_count[i]):
-            j = self.neighbours.nbr_ids[i, k]
+        path_i = nb.nbr_path[i]
+        for k in range(nb.nbr_count[i]):
+            j = nb.nbr_ids[i, k]
+            # Found apart by a gap that the two bodies' paths since cannot have closed: the
+            # test would find them apart again (most candidates, most steps). Gaps are kept
+            # for the first ``slots`` entries, more than any list measured held.
+            if k < self.layout.slots:
+                if path_i + nb.nbr_path[j] < nb.nbr_gap[i, k]:
+                    continue
             if not self.near(i, j):
+                if k < self.layout.slots:
+                    reach = m.body_radius[i] + m.body_radius[j]
+                    apart = (d.body_pos[j] - d.body_pos[i]).norm() - reach
+                    nb.nbr_gap[i, k] = self.gap_bound(i, j, apart, path_i)
                 continue
             # The pair's memory from the last step, if it was in contact then.
             xi = ti.cast(0.0, self.layout.real)
@@ -596,9 +619,11 @@ class ContactStage(Stage):
                         theta = old.theta[s]
                     if ti.static(self.layout.crushing):
                         crushed = old.crushed[s]
-            carried = self.pair(
+            carried, gap = self.pair(
                 i, j, p, p_normals, n_p, xi, elastic, spring, theta, crushed, used, dt, serial
             )
+            if k < self.layout.slots:
+                nb.nbr_gap[i, k] = self.gap_bound(i, j, ti.cast(gap, ti.f64), path_i)
             if ti.static(self.layout.energy):
                 if carried > used:  # in contact: its memory carries on
                     severed -= ti.cast(spring, ti.f64)
@@ -612,6 +637,21 @@ class ContactStage(Stage):
         # into CapacityError. (The list's own overflow is reported when it is built.)
         if used > self.layout.slots:
             ti.atomic_max(d.status[self.model.body_world[i], Status.SLOT_OVERFLOW], used)
+
+    @ti.func
+    def gap_bound(self, i, j, gap, path_i):
+        """What ``nbr_gap`` keeps of a pair found ``gap`` apart (m; negative: not proven
+        apart, -1 kept): the gap less a margin for round-off (``GAP_MARGIN`` of the two
+        circumradii, far above the error of outlines turned and shifted in float32), plus
+        both bodies' paths now, rounded down to float32. While the paths sum to less, no
+        point of either body can have moved into the other."""
+        m, nb = ti.static((self.model, self.neighbours))
+        bound = ti.cast(-1.0, ti.f32)
+        margin = GAP_MARGIN * ti.cast(m.body_radius[i] + m.body_radius[j], ti.f64)
+        if gap > margin:
+            total = gap - margin + path_i + nb.nbr_path[j]
+            bound = ti.cast(total * (1.0 - 1e-6), ti.f32)  # f32 rounds to nearest: below
+        return bound
 
     @ti.func
     def list_add(self, i, j, n):
@@ -638,6 +678,11 @@ class ContactStage(Stage):
         nb.nbr_count[i] = ti.min(n, self.layout.nbr_len)
         nb.nbr_ref_pos[i] = d.body_pos[i]
         nb.nbr_ref_angle[i] = d.body_angle[i]
+        # No entry proven apart yet; paths count from here (the world's lists are rebuilt
+        # together, so a partner's path restarts too).
+        nb.nbr_path[i] = 0.0
+        for k in range(ti.min(n, self.layout.slots)):
+            nb.nbr_gap[i, k] = ti.cast(-1.0, ti.f32)
         if n > self.layout.nbr_len:
             ti.atomic_max(d.status[self.model.body_world[i], Status.LIST_OVERFLOW], n)
 

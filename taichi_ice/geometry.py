@@ -346,15 +346,14 @@ def sat_separated(p: np.ndarray, q: np.ndarray) -> bool:
     return min_penetration_axis(p, q)[0] <= 0.0
 
 
-def facing_separated(p: np.ndarray, q: np.ndarray, toward) -> bool:
-    """True when the edge of ``p`` that faces ``toward`` separates ``p`` from ``q``.
+def facing_gap(p: np.ndarray, q: np.ndarray, toward) -> float:
+    """How far ``q`` lies beyond the edge of ``p`` that faces ``toward`` (m; negative: it
+    reaches past that edge's line).
 
     The facing edge is the one whose outward normal has the largest component along
     ``toward`` (the first of equals), typically the direction from ``p``'s centroid to
-    ``q``'s. A sufficient test, not a complete one: True proves the pair apart (any
-    separating line does), False proves nothing. The contact step tries it for both polygons
-    before the full separating-axis test: in the random box of 1e4 diamonds it settles 99 %
-    of the candidate pairs whose bounding circles meet but which do not touch.
+    ``q``'s. A gap >= 0 proves the pair apart (any separating line does) by at least that
+    much: the distance between the polygons is never less. A negative one proves nothing.
 
     Args:
         p: ``(n, 2)`` counter-clockwise convex polygon (m).
@@ -364,7 +363,17 @@ def facing_separated(p: np.ndarray, q: np.ndarray, toward) -> bool:
     p = np.asarray(p, dtype=np.float64)
     normals = edge_normals(p)
     k = int(np.argmax(normals @ np.asarray(toward, dtype=np.float64)))
-    return bool(-np.min((np.asarray(q, dtype=np.float64) - p[k]) @ normals[k]) <= 0.0)
+    return float(np.min((np.asarray(q, dtype=np.float64) - p[k]) @ normals[k]))
+
+
+def facing_separated(p: np.ndarray, q: np.ndarray, toward) -> bool:
+    """True when the edge of ``p`` that faces ``toward`` separates ``p`` from ``q``
+    (``facing_gap`` >= 0). A sufficient test, not a complete one: the contact step tries it
+    for both polygons before the full separating-axis test: in the random box of 1e4
+    diamonds it settles 99 % of the candidate pairs whose bounding circles meet but which do
+    not touch.
+    """
+    return facing_gap(p, q, toward) >= 0.0
 
 
 def intersection_polygon(p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -657,11 +666,9 @@ def _reach_past_ti(a, n, other: ti.template(), n_other):
 
 
 @ti.func
-def facing_separated_ti(
-    p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), n_q, toward
-):
-    """Taichi twin of :func:`facing_separated`, the outward unit normals of ``p``'s edges
-    given (``edge_normals_ti``, or a body's turned ``vert_normal_local``)."""
+def facing_gap_ti(p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), n_q, toward):
+    """Taichi twin of :func:`facing_gap`, the outward unit normals of ``p``'s edges given
+    (``edge_normals_ti``, or a body's turned ``vert_normal_local``)."""
     best = ti.math.dot(ti.math.vec2(p_normals[0, 0], p_normals[0, 1]), toward)
     a = ti.math.vec2(p[0, 0], p[0, 1])
     n = ti.math.vec2(p_normals[0, 0], p_normals[0, 1])
@@ -673,7 +680,7 @@ def facing_separated_ti(
                 best = along
                 a = ti.math.vec2(p[k, 0], p[k, 1])
                 n = nk
-    return _reach_past_ti(a, n, q, n_q) <= 0.0
+    return -_reach_past_ti(a, n, q, n_q)
 
 
 @ti.func

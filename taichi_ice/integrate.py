@@ -57,6 +57,7 @@ class Integrator(Stage):
                 "body_world",
                 "nbr_ref_pos",
                 "nbr_ref_angle",
+                "nbr_path",
             ),
             writes=(
                 "body_force_q",
@@ -71,6 +72,7 @@ class Integrator(Stage):
                 "body_rot",
                 "world_nbr_stale",
                 "nbr_rebuild",
+                "nbr_path",
             ),
         ),
         "orient": Access(reads=("body_angle",), writes=("body_rot",)),
@@ -116,6 +118,22 @@ class Integrator(Stage):
         if not m.body_small[i]:
             dist += m.body_radius[i] * ti.abs(d.body_angle[i] - nb.nbr_ref_angle[i])
         return dist
+
+    @ti.func
+    def displace(self, i, shift, turn):
+        """Shift body i's centroid by ``shift`` (m, f64) and turn it by ``turn`` (rad), and add
+        to its ``nbr_path`` how far any point of it moved: the centroid's step plus its
+        circumradius times the turn (an arc is longer than its chord), both as stored, so
+        rounding of the angle is counted too. The contact stage skips a pair found apart by
+        a gap while their paths since add up to less (``ContactStage.body``)."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        pos, angle = d.body_pos[i], d.body_angle[i]
+        d.body_pos[i] = pos + shift
+        d.body_angle[i] = angle + turn
+        moved = (d.body_pos[i] - pos).norm() + m.body_radius[i] * ti.abs(
+            ti.cast(d.body_angle[i] - angle, ti.f64)
+        )
+        nb.nbr_path[i] = nb.nbr_path[i] + moved
 
     @ti.func
     def moving(self, i):
@@ -165,8 +183,7 @@ class Integrator(Stage):
                     d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
             d.body_vel[i] = v1
             d.body_omega[i] = w1
-            d.body_pos[i] = d.body_pos[i] + ti.cast(dt * v1, ti.f64)
-            d.body_angle[i] = d.body_angle[i] + dt * w1
+            self.displace(i, ti.cast(dt * v1, ti.f64), dt * w1)
             self.turn(i)
             self.moving(i)
             speed2 = v1.norm_sqr()
@@ -182,8 +199,7 @@ class Integrator(Stage):
                 d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(
                     -(f.dot(v) + tau * w) * dt, ti.f64
                 )
-            d.body_pos[i] = d.body_pos[i] + ti.cast(dt * v, ti.f64)
-            d.body_angle[i] = d.body_angle[i] + dt * w
+            self.displace(i, ti.cast(dt * v, ti.f64), dt * w)
             if w != 0.0:
                 self.turn(i)
             self.moving(i)

@@ -49,7 +49,7 @@ SCAN = 256
 # Element types: "real" is the run's precision (f64 or f32); the rest are fixed. Energies and
 # impulses accumulate over a whole run in f64 whatever the precision, and forces are gathered
 # in 64-bit fixed point (state.FORCE_QUANTUM).
-DTYPES = ("real", "f64", "i32", "i64")
+DTYPES = ("real", "f64", "f32", "i32", "i64")
 
 # Where a field's values come from at set-up: "host" (an array that assemble builds), or a
 # constant fill.
@@ -226,6 +226,8 @@ NEIGHBOURS: tuple[Var, ...] = (
     Var("nbr_count", "i32", ("n_bodies",), "", "entries of each body's list"),
     Var("nbr_ref_pos", "f64", ("n_bodies",), "m", "centroid when the list was built", lanes=2),
     Var("nbr_ref_angle", "real", ("n_bodies",), "rad", "angle when the list was built"),
+    Var("nbr_path", "f64", ("n_bodies",), "m", "how far any point of the body can have moved since its list was built: the sum over the steps of dt (|v| + radius |omega|)"),
+    Var("nbr_gap", "f32", ("n_bodies", "slots"), "m", "of each of the first slots entries of the list found apart: that gap, less a margin, plus both bodies' nbr_path then; the pair cannot touch while their nbr_path sum to less (-1: test it; later entries are tested every step)", init=-1),
     Var("world_nbr_stale", "i32", ("n_worlds",), "", "1 if the world's lists must be rebuilt before its next step", init=1),
     Var("nbr_rebuild", "i32", (), "", "1 if some world's lists are stale (the parallel step reads it back before each step)", role="cold", init=1),
 )

@@ -35,27 +35,37 @@ def ti_dtype(v: Var, layout: Layout):
     return _TI_DTYPES[layout.precision if v.dtype == "real" else v.dtype]
 
 
-def make_field(v: Var, layout: Layout):
-    """One Taichi field as declared (a switched-off or empty field gets one element)."""
+def make_field(v: Var, layout: Layout, fill: bool = True):
+    """One Taichi field as declared (a switched-off or empty field gets one element), filled
+    with its ``init`` value unless ``fill`` is off (then the caller fills it)."""
     shape = schema.allocated_shape(layout, v)
     dtype = ti_dtype(v, layout)
     if v.lanes > 1:
         field = ti.Vector.field(v.lanes, dtype, shape=shape)
     else:
         field = ti.field(dtype, shape=shape)
-    if v.init not in (0, schema.HOST):
+    if fill and v.init not in (0, schema.HOST):
         field.fill(v.init)
     return field
 
 
 class Fields:
-    """A group of declared fields as attributes (``fields.body_pos``)."""
+    """A group of declared fields as attributes (``fields.body_pos``).
+
+    Every field is declared before any is filled: Taichi places the fields declared since
+    its last kernel launch in one tree of memory, a fill is a launch, and a process holds at
+    most 512 trees (Taichi's LLVM backends). Filled as declared, a World took 5 trees, and a
+    process (the test suite) could build no more than ~100 Worlds; filled afterwards, 2.
+    """
 
     def __init__(self, layout: Layout, decls: Iterable[Var]):
         self.layout = layout
         self.names = tuple(v.name for v in decls)
         for v in decls:
-            setattr(self, v.name, make_field(v, layout))
+            setattr(self, v.name, make_field(v, layout, fill=False))
+        for v in decls:
+            if v.init not in (0, schema.HOST):
+                getattr(self, v.name).fill(v.init)
 
 
 class Model(Fields):

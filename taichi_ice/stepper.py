@@ -74,7 +74,9 @@ class WorldStepper(Stage):
                 "contact_theta",
                 "contact_xi",
                 "nbr_count",
+                "nbr_gap",
                 "nbr_ids",
+                "nbr_path",
                 "nbr_ref_angle",
                 "nbr_ref_pos",
                 "probe_impulse",
@@ -110,7 +112,9 @@ class WorldStepper(Stage):
                 "contact_theta",
                 "contact_xi",
                 "nbr_count",
+                "nbr_gap",
                 "nbr_ids",
+                "nbr_path",
                 "nbr_ref_angle",
                 "nbr_ref_pos",
                 "probe_impulse",
@@ -207,7 +211,10 @@ class BodyTeam(Stage):
     The barriers spin on an atomic counter (``barrier``) instead of sleeping: the team must
     have a core for each of its threads (``threads``: Taichi's threads, at most the cores this
     process may use, ``backend.usable_cores``), or a thread waits out the time slice of the
-    one it waits for. Every one of the team's iterations runs at once on its own worker: the
+    one it waits for; and when other load on the machine takes one of its cores, the rest
+    spin until that thread runs again (a time slice: milliseconds, a stall that small worlds,
+    with many steps a millisecond, feel most; ``world.auto_stepping`` keeps them a thread
+    per world). Every one of the team's iterations runs at once on its own worker: the
     pool wakes as many workers as the loop's ``parallelize`` and a worker cannot take a second
     iteration while its first waits at a barrier. The bodies, the contact and integration
     code and the order of a body's candidates are those of the kernels per stage, and forces

@@ -50,20 +50,26 @@ STAGES = {
 # "auto" on the CPU steps worlds of up to PER_WORLD_MAX_BODIES bodies one thread per world
 # (many steps per launch), larger ones in parallel over bodies; and with fewer worlds than
 # CPU threads, which would leave threads idle, only worlds of up to FEW_WORLDS_MAX_BODIES.
-# Measured on the 2-core VM, random box of the paper's diamonds, no budget, the faster of
-# 9 timings, 3 pairs each, with the parallel step on the CPU as a team of threads in one
-# launch (``stepper.BodyTeam``): a lone world steps 1.3-1.5x as fast in parallel over bodies
-# as a thread per world at 300 to 3,000 blocks, 1.03-1.16x at 100, 1.2x at 200, and 0.75-0.86x
-# the pillar scene (63 blocks); two worlds step 1.3x as fast a thread each at 1,000 and 3,000
-# blocks, 2.1x at 5,000 and 1.2x at 10,000 blocks each. (Before the team, whose barriers
-# replace two launches and two rounds of the thread pool a step, a lone world crossed over
-# at 4,000 to 5,000 blocks.)
+# Measured on the 2-core VM, random box of the paper's diamonds, no budget, with the
+# parallel step on the CPU as a team of threads in one launch (``stepper.BodyTeam``), the
+# mean of 60 alternating timings of 10 steps from the start: a lone world steps at 0.125 ms
+# a step a thread per world against 0.43 in parallel at 1,000 blocks, 0.27 against 0.30 at
+# 2,000, 0.45 against 0.37 at 3,000. The team is faster in most timings (1.3-1.5x the
+# fastest at 300 to 3,000 blocks) but, spinning at two barriers a step, it stalls for a
+# time slice whenever the VM's other load takes one of its cores (the slowest tenth of
+# timings: 1.4 ms a step at 1,000 blocks); the fewer its steps per millisecond, the less
+# that costs. Two worlds step 1.3x as fast a thread each as in parallel at 1,000 and 3,000
+# blocks each, 2.1x at 5,000 and 1.2x at 10,000 (the fastest of 9 timings). (Before the
+# team, with two launches and two rounds of the thread pool a step, a lone world crossed
+# over at 3,000 to 4,000 blocks.)
 PER_WORLD_MAX_BODIES = 10000
-FEW_WORLDS_MAX_BODIES = 100
+FEW_WORLDS_MAX_BODIES = 2000
 # On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
 GPU_MIN_WORLDS = 1024
 STEPPINGS = ("auto", "worlds", "bodies")
+# Trees of Taichi fields a World may add (``state.Fields``: 2, and the team's words).
+TREES_PER_WORLD = 3
 
 
 def auto_stepping(largest: int, n_worlds: int, arch: str | None, threads: int) -> str:
@@ -119,6 +125,13 @@ class World:
         if stepping not in STEPPINGS:
             raise ValueError(f"stepping must be one of {STEPPINGS}, got {stepping!r}")
         backend.real_dtype(precision)
+        if backend.field_trees() + TREES_PER_WORLD > backend.MAX_FIELD_TREES:
+            raise UsageError(
+                f"this process holds {backend.field_trees()} trees of Taichi fields, the most "
+                f"it can ({backend.MAX_FIELD_TREES}: about {backend.MAX_FIELD_TREES // 2} "
+                "Worlds; Taichi never frees them): step other scenes of the same layout on a "
+                "World built before (World.reload), or build the rest in a new process"
+            )
         self.batch = assemble(
             scenes, dt=dt, precision=precision, slots=slots, force_dt=force_dt, energy=energy
         )

@@ -15,6 +15,7 @@ from taichi_ice.errors import PolygonError
 from taichi_ice.geometry import (
     check_polygon,
     diamond,
+    facing_gap,
     facing_separated,
     intersection_polygon,
     mass_properties,
@@ -231,6 +232,10 @@ def test_facing_edge_never_separates_a_touching_pair(pairs, reference):
         either = facing_separated(p, q, _toward(p, q)) or facing_separated(q, p, _toward(q, p))
         if either:
             assert shape.area == 0.0 and not Polygon(p).intersects(Polygon(q))
+            # The gap it proves is a lower bound of the distance between the polygons (what
+            # the contact step relies on to skip the pair while both move less than it).
+            gap = max(facing_gap(p, q, _toward(p, q)), facing_gap(q, p, _toward(q, p)))
+            assert 0.0 <= gap <= Polygon(p).distance(Polygon(q)) * (1 + SHAPELY_RTOL) + 1e-12
         if shape.area == 0.0:
             apart += 1
             settled += either
@@ -242,7 +247,8 @@ def test_facing_edge_never_separates_a_touching_pair(pairs, reference):
 
 
 def test_taichi_facing_edge_equals_its_numpy_twin(batch, taichi_runtime):
-    """facing_separated_ti gives facing_separated's verdict on random pairs (off touching)."""
+    """facing_gap_ti gives facing_gap's gap, and so facing_separated's verdict, on random
+    pairs (the verdict off touching)."""
     result, rounded = batch
     rtol = _ti_rtol(taichi_runtime)
     checked = 0
@@ -255,6 +261,8 @@ def test_taichi_facing_edge_equals_its_numpy_twin(batch, taichi_runtime):
         if abs(reach) < rtol * size:
             continue
         assert result.facing[b] == facing_separated(p, q, _toward(p, q))
+        assert result.facing_gap[b] == pytest.approx(reach * -1.0, abs=rtol * size)
+        assert facing_gap(p, q, _toward(p, q)) == pytest.approx(-reach, abs=1e-12 * size)
         checked += 1
     assert checked > 0.9 * N_PAIRS
 

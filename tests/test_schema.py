@@ -111,20 +111,20 @@ def test_docs_state_table_is_generated_from_the_schema():
 def test_traffic_model_counts_the_integrator_by_hand():
     """integrator.advance moves, per body and f64: reads 10 scalars, 4 vectors, the i64 force
     and torque, 6 energy terms and what the lists' staleness needs; writes back the same
-    minus the model, plus the body's rotation, the status and the stale flags."""
+    minus the model, plus the body's rotation and path, the status and the stale flags."""
     batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
     layout = batch.layout.replace(n_bodies=1000, n_probes=0, water=False, force_ext=True)
     n = layout.n_bodies
     # reads: probe, kind (i32); force_ext (2 x f64); inv_mass, inv_inertia (f64); force_q
     # (2 x i64), torque_q (i64); vel (2 x f64), omega, pos (2 x f64), angle (f64); energy
     # (6 x f64, codes.BodyEnergy); time_step (f64); for the neighbour lists small, world
-    # (i32), radius (f64), the position and angle at the last build (3 x f64). No probes:
-    # probe_impulse moves nothing.
-    lists = 4 + 4 + 8 + 16 + 8
+    # (i32), radius (f64), the position and angle at the last build (3 x f64), the path
+    # since (f64). No probes: probe_impulse moves nothing.
+    lists = 4 + 4 + 8 + 16 + 8 + 8
     body = 4 + 4 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 48 + lists
     reads = n * body + 8
     # writes: force_q, torque_q, vel, omega, pos, angle, energy; the rotation (cos, sin);
-    # status (4 x i32); the stale flags (one world, and the batch's).
-    writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 48 + 16) + 16 + 4 + 4
+    # the path; status (4 x i32); the stale flags (one world, and the batch's).
+    writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 48 + 16 + 8) + 16 + 4 + 4
     got = schema.traffic({"integrator": STAGES["integrator"]}, layout, contacts=0)
     assert got["integrator.advance"] == reads + writes

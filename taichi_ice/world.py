@@ -110,6 +110,15 @@ class World:
             "auto" (``auto_stepping``: worlds if no world has more than
             ``PER_WORLD_MAX_BODIES`` bodies, ``FEW_WORLDS_MAX_BODIES`` when there are fewer
             worlds than CPU threads, and on a GPU only for ``GPU_MIN_WORLDS`` worlds or more).
+
+    Attributes:
+        team: the ``stepper.BodyTeam`` that steps bodies in parallel on the CPU, or None
+            (worlds stepping, or a GPU: a kernel per stage and step). Setting it to None
+            steps with the kernels per stage instead, to compare (same state bit for bit).
+
+    Raises:
+        UsageError: the process holds too many of Taichi's trees of fields for another World
+            (``backend.MAX_FIELD_TREES``; Taichi never frees them).
     """
 
     def __init__(

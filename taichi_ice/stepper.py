@@ -198,8 +198,9 @@ class BodyTeam(Stage):
     Stepping in parallel over bodies with a kernel per stage (``contacts.compute``, then
     ``integrator.advance``) pays, every step, two launches from Python and two rounds of
     Taichi's thread pool, whose workers sleep on a condition variable between tasks: about
-    60 us a round on the 2-core VM, a fifth of a step at 1e4 blocks. ``run(n)`` launches once
-    for ``n`` steps. Its parallel loop has one iteration per thread of the team; each takes
+    60 us a round on the 2-core VM, a fifth of a step at 1e4 blocks when it was measured.
+    ``run(n)`` launches once for ``n`` steps (at most ``MAX_STEPS``: the barriers count
+    arrivals in 32 bits). Its parallel loop has one iteration per thread of the team; each takes
     the steps in turn:
 
         for each step:   contacts of bodies in chunks claimed from a shared counter
@@ -246,6 +247,9 @@ class BodyTeam(Stage):
     # Bodies a thread claims at a time: enough that claims are rare, few enough that the
     # threads finish a stage together (1e4 bodies: 157 chunks for 2 threads).
     CHUNK = 64
+    # Steps a launch may take: the 2 n threads arrivals of its barriers stay in an i32 for
+    # teams of up to 1,000 threads.
+    MAX_STEPS = 1 << 20
 
     def __init__(
         self,

@@ -281,7 +281,7 @@ class World:
             left = n
             while left > 0:
                 self.refresh_lists()
-                left -= self.team.run(left)
+                left -= self.team.run(min(left, self.team.MAX_STEPS))
         else:
             for _ in range(n):
                 self.refresh_lists()

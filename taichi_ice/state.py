@@ -35,18 +35,14 @@ def ti_dtype(v: Var, layout: Layout):
     return _TI_DTYPES[layout.precision if v.dtype == "real" else v.dtype]
 
 
-def make_field(v: Var, layout: Layout, fill: bool = True):
-    """One Taichi field as declared (a switched-off or empty field gets one element), filled
-    with its ``init`` value unless ``fill`` is off (then the caller fills it)."""
+def make_field(v: Var, layout: Layout):
+    """One Taichi field as declared (a switched-off or empty field gets one element), not
+    yet filled with its ``init`` value (``Fields`` fills a group once it is declared)."""
     shape = schema.allocated_shape(layout, v)
     dtype = ti_dtype(v, layout)
     if v.lanes > 1:
-        field = ti.Vector.field(v.lanes, dtype, shape=shape)
-    else:
-        field = ti.field(dtype, shape=shape)
-    if fill and v.init not in (0, schema.HOST):
-        field.fill(v.init)
-    return field
+        return ti.Vector.field(v.lanes, dtype, shape=shape)
+    return ti.field(dtype, shape=shape)
 
 
 class Fields:
@@ -62,7 +58,7 @@ class Fields:
         self.layout = layout
         self.names = tuple(v.name for v in decls)
         for v in decls:
-            setattr(self, v.name, make_field(v, layout, fill=False))
+            setattr(self, v.name, make_field(v, layout))
         for v in decls:
             if v.init not in (0, schema.HOST):
                 getattr(self, v.name).fill(v.init)

@@ -137,7 +137,8 @@ class World:
         if backend.field_trees() + TREES_PER_WORLD > backend.MAX_FIELD_TREES:
             raise UsageError(
                 f"this process holds {backend.field_trees()} trees of Taichi fields, the most "
-                f"it can ({backend.MAX_FIELD_TREES}: about {backend.MAX_FIELD_TREES // 2} "
+                f"it can ({backend.MAX_FIELD_TREES}: about "
+                f"{backend.MAX_FIELD_TREES // TREES_PER_WORLD}-{backend.MAX_FIELD_TREES // 2} "
                 "Worlds; Taichi never frees them): step other scenes of the same layout on a "
                 "World built before (World.reload), or build the rest in a new process"
             )

@@ -159,6 +159,7 @@ def assemble(
         contact_stiffness=first.ice.contact_stiffness,
         contact_viscosity=first.ice.contact_viscosity,
         tangential_stiffness=first.ice.tangential_stiffness,
+        tangential_damping=first.ice.tangential_damping,
         crushing=first.ice.crushing_strength is not None,
         crushing_force=(first.ice.crushing_strength or 0.0) * first.ice.thickness,
         runaway_speed=_runaway_speed(scenes, dt),

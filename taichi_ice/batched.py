@@ -409,8 +409,8 @@ def _contact_friction_kernel(
     method: ti.template(),
     tol: ti.template(),
 ):
-    # inputs (N, 10): theta, f_trial, f_n, K, dt, A, B, mu0, v_star, t_c; codes (N, 2):
-    # memory, rest rule; out (N, 3): mu, theta_new, V.
+    # inputs (N, 12): theta, last_slip, slip, f_trial, f_n, K, dt, A, B, mu0, v_star, t_c;
+    # codes (N, 2): memory, rest rule; out (N, 3): mu, theta_new, V.
     for i in range(inputs.shape[0]):
         mu, theta, v = contact_friction_ti(
             inputs[i, 0],
@@ -423,6 +423,8 @@ def _contact_friction_kernel(
             inputs[i, 7],
             inputs[i, 8],
             inputs[i, 9],
+            inputs[i, 10],
+            inputs[i, 11],
             codes[i, 0],
             codes[i, 1],
             method,
@@ -437,7 +439,8 @@ def contact_friction_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.nd
     """``slip.contact_friction_ti`` on N contacts at once (for the twin tests).
 
     Args:
-        inputs: ``(N, 10)`` rows (theta, f_trial, f_n, K, dt, A, B, mu0, v_star, t_c).
+        inputs: ``(N, 12)`` rows (theta, last_slip, slip, f_trial, f_n, K, dt, A, B, mu0,
+            v_star, t_c).
         codes: ``(N, 2)`` int rows (memory, rest rule).
         method: ``codes.ThetaMethod`` (compile-time).
 
@@ -450,9 +453,9 @@ def contact_friction_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.nd
     real = backend.real_dtype(precision)
     inputs = np.ascontiguousarray(inputs, dtype=real)
     codes = np.ascontiguousarray(codes, dtype=np.int32)
-    if inputs.ndim != 2 or inputs.shape[1] != 10 or codes.shape != (inputs.shape[0], 2):
+    if inputs.ndim != 2 or inputs.shape[1] != 12 or codes.shape != (inputs.shape[0], 2):
         raise ValueError(
-            f"inputs must be (N, 10) and codes (N, 2); got {inputs.shape}, {codes.shape}"
+            f"inputs must be (N, 12) and codes (N, 2); got {inputs.shape}, {codes.shape}"
         )
     out = np.zeros((inputs.shape[0], 3), dtype=real)
     if inputs.shape[0]:

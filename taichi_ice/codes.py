@@ -69,7 +69,7 @@ class EnergyTerm(_Labelled):
     KINETIC = 4  # kinetic energy, translational + rotational
     ELASTIC = 5  # elastic energy in overlaps and tangential springs
     CRUSHING = 6  # dissipated by crushing: overlap beyond the ice's strength, not recovered
-    SEVERED = 7  # held by tangential stick springs when their contacts ended (see BodyEnergy)
+    SEVERED = 7  # held by contacts (overlap and stick spring) when they ended (see BodyEnergy)
 
 
 class BodyEnergy(_Labelled):
@@ -81,10 +81,12 @@ class BodyEnergy(_Labelled):
     DRAG = 2  # water drag dissipation on this body
     WORK = 3  # work done by this body (kinematic) or on it by its external force
     CRUSHING = 4  # crushing work of the contacts this body owns
-    # Work done on the stick springs of this body's contacts that they still held when the
-    # contact ended. A spring's stiffness follows the contact width, so one that stiffens
-    # while stretched gives back more work than it took (negative) and one that softens
-    # less: energy that no force accounts for, and that the step size does not change.
+    # Elastic energy this body's contacts still held when they ended: the work done on
+    # their overlaps and stick springs that no force gave back. The normal force follows the
+    # overlap's area and the spring's stiffness the contact width, neither a potential, so
+    # floes that slide apart (a crushed overlap above all) take energy along that the step
+    # size does not change; a spring that stiffened while stretched gives back more than it
+    # took (negative).
     SEVERED = 5
 
 

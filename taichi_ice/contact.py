@@ -8,18 +8,19 @@ For every candidate pair the owner body's thread clips the two outlines
   ice strength (``[ice] crushing_strength``) the elastic force is capped at strength x
   thickness x L: the overlap beyond the cap is crushed (``crush``), not recovered, and its
   work is booked as crushing;
-- tangential force from a stick spring ``k_t = ratio k_e L`` and dashpot
-  ``c_t = ratio k_v L`` (both proportional to the contact width, like the normal ones) on the
-  tangential stretch ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979): beyond the cap
-  the contact slips, the spring-dashpot relaxes toward the cap and the slip distance times
-  the cap is frictional work;
+- tangential force from a stick spring ``k_t = ratio k_e L`` (proportional to the contact
+  width, like the normal one) and a dashpot ``c_t`` that damps it critically at the pair's
+  mass along the tangent (``tangential_damping``) on the tangential stretch ``xi``, capped at
+  ``mu F_n`` (Cundall and Strack 1979): beyond the cap the contact slips, the spring-dashpot
+  relaxes toward the cap and the slip distance times the cap is frictional work;
 - ``mu`` from the world's law: Coulomb, or rate-and-state (and its variants) through
-  ``slip.contact_friction_ti``: the sliding rate solved in the step, ``theta`` carried by the
-  contact while it slides, and the rule below ``v_star`` (Lishman et al. 2013).
+  ``slip.contact_friction_ti``: the slip rate solved in the step (the sliding rate, never
+  faster than the surfaces), ``theta`` and the slip rate carried by the contact while it
+  slides, and the rule below ``v_star`` (Lishman et al. 2013).
 
 Ownership: each pair is handled once, by a dynamic body if exactly one is dynamic, else by
 the lower id; small-large pairs by the small body. The owner keeps the contact's memory
-(partner, ``xi``, ``theta``, stored elastic energy, crushed area) in one of its K slots;
+(partner, ``xi``, ``theta``, slip rate, stored elastic energy, crushed area) in one of its K slots;
 a pair that no longer overlaps is not written again, so its memory is dropped. The slots
 are single-buffered: only the owner's thread touches them, and it copies the last step's
 memory out (``remember``) before writing this step's over it. More than K contacts raise
@@ -29,16 +30,18 @@ Forces are gathered in 64-bit fixed point (``state.FORCE_QUANTUM``), so a run is
 reproducible on any number of threads and in any batch.
 
 The contact laws are pure functions, each twice (``taichi_ice``'s twin convention: the plain
-name is the NumPy reference, ``_ti`` the Taichi function): ``normal_force`` and
-``tangential_force``. The NumPy reference of a whole pair is ``reference.contact_force``.
+name is the NumPy reference, ``_ti`` the Taichi function): ``normal_force``,
+``tangential_damping``, ``tangential_force`` and ``contact_work``. The NumPy reference of a
+whole pair is ``reference.contact_force``.
 
-Energy: friction (slip), viscous (dashpots) go to the owner's ``body_energy`` row; the
-normal elastic energy of a contact is the work its elastic force ``k_e A`` has done on the
-approach, ``integral k_e A v_n dt``, so that the budget closes up to a residual that shrinks
-with dt (for translation along the normal it is ``integral k_e A dA / L``). The tangential
-stick spring's part of it is also kept alone (``contact_spring``): when the contact ends,
-what the spring still holds goes to the owner's ``SEVERED`` term (its stiffness follows the
-contact width, so that work need not come back: ``codes.BodyEnergy.SEVERED``).
+Energy (``contact_work``): the work of a contact's forces, at the velocity the bodies move
+with over the step, goes to the owner's ``body_energy`` row as friction (slip) and viscous
+(dashpots) and to the contact as the elastic energy it holds: the work its elastic force
+``k_e A`` has done on the approach, ``integral k_e A v_n dt`` (``integral k_e A dA / L`` for
+translation along the normal), and its stick spring's. When the contact ends, what it still
+holds goes to the owner's ``SEVERED`` term: the normal force follows the overlap's area
+and the spring's stiffness the contact width, neither a potential, so floes that slide
+apart take work the contact never gives back (``codes.BodyEnergy.SEVERED``).
 """
 
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
@@ -52,7 +55,7 @@ from .broadphase import bucket_of
 from .codes import BodyEnergy, BodyKind, Status
 from .geometry import facing_gap_ti, overlap_normals_ti
 from .schema import Access, Layout, Stage
-from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction_ti
+from .slip import NEW_CONTACT, NEWTON_TOLERANCE, contact_friction_ti
 from .state import FORCE_QUANTUM, Data, Model
 
 # Round-off allowance of a gap that lets a pair be skipped (``ContactStage.gap_bound``), as
@@ -127,6 +130,35 @@ def crush(area, crushed, width, k_e, force_per_width):
 
 
 @ti.func
+def tangential_damping_ti(k_t, zeta, inv_mass_i, inv_turn_i, inv_mass_j, inv_turn_j):
+    """Taichi twin of :func:`tangential_damping`."""
+    inv_m = inv_mass_i + inv_turn_i + inv_mass_j + inv_turn_j
+    return 2.0 * zeta * ti.sqrt(k_t / inv_m)
+
+
+def tangential_damping(k_t, zeta, inv_mass_i, inv_turn_i, inv_mass_j, inv_turn_j):
+    """Dashpot ``c_t`` (N s/m) that damps the stick spring ``k_t`` to ``zeta`` of critical.
+
+    The spring holds the two bodies' contact points together along the tangent ``t``, where
+    they move as one mass ``m_t``: ``1 / m_t = 1/m_i + (r_i x t)^2 / I_i + 1/m_j +
+    (r_j x t)^2 / I_j`` (0 for a fixed or kinematic body), so ``c_t = 2 zeta sqrt(k_t m_t)``.
+    Critically damped (``zeta = 1``, the default ``[ice] tangential_damping``), a load taken
+    up at once does not overshoot: a contact that stopped sliding holds any load below
+    ``mu0 F_n`` as a rigid one would. (A lighter dashpot rings: a block stopped by friction
+    under a constant pull of 0.8 mu0 F_n overshoots to above mu0 F_n and slides off at
+    zeta = 0.6; ``docs/friction.md``.)
+
+    Args:
+        k_t: stick spring (N/m). zeta: fraction of critical damping.
+        inv_mass_i, inv_mass_j: ``1 / m`` of the two bodies (1/kg).
+        inv_turn_i, inv_turn_j: ``(r x t)^2 / I`` of the two bodies (1/kg), ``r`` from the
+            centroid to the contact point.
+    """
+    inv_m = inv_mass_i + inv_turn_i + inv_mass_j + inv_turn_j
+    return 2.0 * zeta * math.sqrt(k_t / inv_m)
+
+
+@ti.func
 def tangential_force_ti(xi, slip_speed, dt, k_t, c_t, cap):
     """Taichi twin of :func:`tangential_force`."""
     trial = xi + slip_speed * dt
@@ -172,6 +204,85 @@ def tangential_force(xi, slip_speed, dt, k_t, c_t, cap):
     return force, new_xi, slip_work, damp_work
 
 
+@ti.func
+def contact_work_ti(
+    f_n,
+    f_el,
+    f_t,
+    approach,
+    slip,
+    approach_change,
+    slip_change,
+    dt,
+    slip_work,
+    damp_work,
+    spring_work,
+    crush_work,
+):
+    """Taichi twin of :func:`contact_work`."""
+    approach_mid = approach + 0.5 * approach_change
+    extra = -f_t * 0.5 * slip_change * dt
+    held = f_el * approach_mid * dt - crush_work + spring_work
+    viscous = (f_n - f_el) * approach_mid * dt + damp_work
+    friction = slip_work
+    if slip_work > 0.0:
+        friction += extra
+    else:
+        held += extra
+    return held, viscous, friction
+
+
+def contact_work(
+    f_n,
+    f_el,
+    f_t,
+    approach,
+    slip,
+    approach_change,
+    slip_change,
+    dt,
+    slip_work,
+    damp_work,
+    spring_work,
+    crush_work,
+):
+    """The work a contact's forces do on it over a step, split into what it holds and what
+    it dissipates (J), booked at the velocity the two bodies move with over the step.
+
+    Symplectic Euler changes a body's kinetic energy by ``F . (v0 + v1) / 2 dt``: a force's
+    work at the mid-step velocity, not the start-of-step one the contact's forces were
+    evaluated with (which overstated a colliding contact's elastic energy by (pi / 2) w dt
+    of it, and left a residual of 1.6 % of what a free field lost). The mid-step velocity is
+    not known when the contacts are evaluated, so each body's last velocity change stands in
+    for this step's (``body_dvel``, ``body_domega``): ``v_mid = v0 + dv_last / 2``, second
+    order where the motion is smooth. The tangential force's extra work over the step's
+    extra slip goes to friction if the contact slides, to its spring if it sticks.
+
+    Args:
+        f_n: normal force (N). f_el: its elastic part ``k_e A`` (N). f_t: tangential force
+            on the partner along the tangent (N).
+        approach, slip: the normal approach and tangential slip speeds at the step's start
+            (m/s). approach_change, slip_change: their change over the last step (m/s).
+        dt: step (s). slip_work, damp_work: the step's frictional and tangential dashpot work
+            (``tangential_force``, J). spring_work: the stick spring's energy change (J).
+        crush_work: the work on the crushed overlap (J).
+
+    Returns:
+        ``(held, viscous, friction)``: the change of the energy the contact holds, and the
+        step's viscous and frictional dissipation (J).
+    """
+    approach_mid = approach + 0.5 * approach_change
+    extra = -f_t * 0.5 * slip_change * dt
+    held = f_el * approach_mid * dt - crush_work + spring_work
+    viscous = (f_n - f_el) * approach_mid * dt + damp_work
+    friction = slip_work
+    if slip_work > 0.0:
+        friction += extra
+    else:
+        held += extra
+    return held, viscous, friction
+
+
 @ti.data_oriented
 class ContactStage(Stage):
     """Finds overlapping pairs, applies contact forces and keeps contact memory."""
@@ -194,6 +305,8 @@ class ContactStage(Stage):
                 "world_t_c",
                 "world_memory",
                 "world_rest_rule",
+                "body_inv_mass",
+                "body_inv_inertia",
                 # Neighbour lists
                 "nbr_count",
                 "nbr_ids",
@@ -209,12 +322,14 @@ class ContactStage(Stage):
                 "contact_partner",
                 "contact_xi",
                 "contact_elastic",
-                "contact_spring",
                 "contact_theta",
+                "contact_slip",
                 "contact_crushed",
                 "body_force_q",
                 "body_torque_q",
                 "body_energy",
+                "body_dvel",
+                "body_domega",
                 "status",
             ),
             writes=(
@@ -222,8 +337,8 @@ class ContactStage(Stage):
                 "contact_partner",
                 "contact_xi",
                 "contact_elastic",
-                "contact_spring",
                 "contact_theta",
+                "contact_slip",
                 "contact_crushed",
                 "body_force_q",
                 "body_torque_q",
@@ -234,15 +349,19 @@ class ContactStage(Stage):
             per_contact=(
                 "body_vel",
                 "body_omega",
+                "body_inv_mass",
+                "body_inv_inertia",
                 "contact_partner",
                 "contact_xi",
                 "contact_elastic",
-                "contact_spring",
                 "contact_theta",
+                "contact_slip",
                 "contact_crushed",
                 "body_force_q",
                 "body_torque_q",
                 "body_energy",
+                "body_dvel",
+                "body_domega",
             ),
         ),
         "build_lists": Access(
@@ -286,6 +405,7 @@ class ContactStage(Stage):
         self.k_e = float(layout.contact_stiffness)
         self.k_v = float(layout.contact_viscosity)
         self.ratio = float(layout.tangential_stiffness)
+        self.zeta = float(layout.tangential_damping)
         self.crush = float(layout.crushing_force)
         self.tol = NEWTON_TOLERANCE[layout.precision]
         self.method = int(layout.theta_method)
@@ -363,8 +483,8 @@ class ContactStage(Stage):
         n_p,
         xi,
         elastic,
-        spring,
         theta,
+        last_slip,
         crushed,
         used,
         dt,
@@ -372,8 +492,9 @@ class ContactStage(Stage):
     ):
         """Contact between owner i, whose outline relative to its centroid is ``p`` (its
         edges' outward normals ``p_normals``), and
-        partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``spring``,
-        ``theta``, ``crushed``: zero and ``NO_INTERFACE`` if it was not in contact). Returns
+        partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``theta``,
+        ``last_slip``, ``crushed``: zero and ``NEW_CONTACT`` if it was not in contact).
+        Returns
         the owner's new slot count, and the gap (m) by which a facing edge proved the pair
         apart (negative if none did)."""
         m, d = ti.static((self.model, self.data))
@@ -419,16 +540,27 @@ class ContactStage(Stage):
                 if crushed_new > crushed and width > 0.0:
                     crush_work = cap_n * (crushed_new - crushed) / width
 
-            # Tangential: stick spring and dashpot proportional to the contact width.
+            # Tangential: a stick spring proportional to the contact width and a dashpot
+            # that damps it critically, ``tangential_damping_ti``.
             k_t = self.ratio * self.k_e * width
-            c_t = self.ratio * self.k_v * width
+            c_t = tangential_damping_ti(
+                k_t,
+                self.zeta,
+                m.body_inv_mass[i],
+                m.body_inv_inertia[i] * cross2(r_i, tangent) ** 2,
+                m.body_inv_mass[j],
+                m.body_inv_inertia[j] * cross2(r_j, tangent) ** 2,
+            )
             mu = 0.0
             theta_new = 0.0
+            slip_rate = 0.0
             w = m.body_world[i]
             if ti.static(self.layout.rate_state):
                 f_trial = ti.abs(k_t * (xi + slip * dt) + c_t * slip)
-                mu, theta_new, _v = contact_friction_ti(
+                mu, theta_new, slip_rate = contact_friction_ti(
                     theta,
+                    last_slip,
+                    slip,
                     f_trial,
                     f_n,
                     k_t * dt + c_t,
@@ -453,22 +585,33 @@ class ContactStage(Stage):
             self.add_force(j, force, cross2(r_j, force), serial)
             self.add_force(i, -force, -cross2(r_i, force), serial)
 
-            # Elastic energy stored in the contact: the work of its elastic forces. Normal:
-            # on the approach, less what crushed. (integral k_e A dA / L equals it only for
-            # relative translation; when the bodies turn, dA / dt = L v_n at the chord's
-            # middle, not at the centroid where the force acts, and the budget kept an
-            # error dt does not shrink.) Tangential: the spring's energy change at this
-            # step's stiffness, which follows the width.
-            # (Without a budget, ``Layout.energy`` off, none of it is computed.)
+            # The work of the contact's forces, booked at the velocity the bodies move with
+            # over the step (``contact_work_ti``): the elastic part is what the contact holds
+            # (normal, on the approach, less what crushed; tangential, the stick spring's
+            # energy at this step's stiffness, which follows the width), the rest is
+            # dissipated. (Without a budget, ``Layout.energy`` off, none of it is computed.)
             if ti.static(self.layout.energy):
-                elastic += f_el * approach * dt - crush_work
-                spring_work = 0.5 * k_t * (xi_new * xi_new - xi * xi)
-                elastic += spring_work
-                spring += spring_work
+                rel_change = (d.body_dvel[j] + perp(d.body_domega[j], r_j)) - (
+                    d.body_dvel[i] + perp(d.body_domega[i], r_i)
+                )
+                held, viscous, friction = contact_work_ti(
+                    f_n,
+                    f_el,
+                    f_t,
+                    approach,
+                    slip,
+                    -rel_change.dot(normal),
+                    rel_change.dot(tangent),
+                    dt,
+                    slip_work,
+                    damp_work,
+                    0.5 * k_t * (xi_new * xi_new - xi * xi),
+                    crush_work,
+                )
+                elastic += held
                 # The owner's rows: plain stores (an augmented assignment would be an atomic).
-                viscous = (f_n - f_el) * approach * dt + damp_work
                 e_f = d.body_energy[i, BodyEnergy.FRICTION]
-                d.body_energy[i, BodyEnergy.FRICTION] = e_f + slip_work
+                d.body_energy[i, BodyEnergy.FRICTION] = e_f + friction
                 e_v = d.body_energy[i, BodyEnergy.VISCOUS]
                 d.body_energy[i, BodyEnergy.VISCOUS] = e_v + viscous
                 if ti.static(self.layout.crushing):
@@ -480,9 +623,9 @@ class ContactStage(Stage):
                 d.contact_xi[i, used] = xi_new
                 if ti.static(self.layout.energy):
                     d.contact_elastic[i, used] = elastic
-                    d.contact_spring[i, used] = spring
                 if ti.static(self.layout.rate_state):
                     d.contact_theta[i, used] = theta_new
+                    d.contact_slip[i, used] = slip_rate
                 if ti.static(self.layout.crushing):
                     d.contact_crushed[i, used] = crushed_new
             used += 1
@@ -553,8 +696,8 @@ class ContactStage(Stage):
             partner=ti.Vector.zero(ti.i32, k),
             xi=ti.Vector.zero(self.layout.real, k),
             elastic=ti.Vector.zero(self.layout.real, k_budget),
-            spring=ti.Vector.zero(self.layout.real, k_budget),
             theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
+            slip=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
             crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
         )
         n_old = d.contact_count[i]
@@ -563,9 +706,9 @@ class ContactStage(Stage):
             old.xi[s] = d.contact_xi[i, s]
             if ti.static(self.layout.energy):
                 old.elastic[s] = d.contact_elastic[i, s]
-                old.spring[s] = d.contact_spring[i, s]
             if ti.static(self.layout.rate_state):
                 old.theta[s] = d.contact_theta[i, s]
+                old.slip[s] = d.contact_slip[i, s]
             if ti.static(self.layout.crushing):
                 old.crushed[s] = d.contact_crushed[i, s]
         return old, n_old
@@ -582,12 +725,12 @@ class ContactStage(Stage):
         # The owner's outline and its edges' normals once for all its candidates.
         p, n_p = self.outline(i, d.body_pos[i])
         p_normals = self.normals(i)
-        # What the stick springs of the last step's contacts held, less what carries on:
-        # the springs of the contacts that ended (``BodyEnergy.SEVERED``).
+        # What the last step's contacts held, less what carries on: the elastic energy of
+        # the contacts that ended (``BodyEnergy.SEVERED``).
         severed = ti.cast(0.0, ti.f64)
         if ti.static(self.layout.energy):
             for s in range(n_old):
-                severed += ti.cast(old.spring[s], ti.f64)
+                severed += ti.cast(old.elastic[s], ti.f64)
         path_i = nb.nbr_path[i]
         for k in range(nb.nbr_count[i]):
             j = nb.nbr_ids[i, k]
@@ -606,27 +749,39 @@ class ContactStage(Stage):
             # The pair's memory from the last step, if it was in contact then.
             xi = ti.cast(0.0, self.layout.real)
             elastic = ti.cast(0.0, self.layout.real)
-            spring = ti.cast(0.0, self.layout.real)
-            theta = ti.cast(NO_INTERFACE, self.layout.real)
+            theta = ti.cast(NEW_CONTACT, self.layout.real)
+            last_slip = ti.cast(0.0, self.layout.real)
             crushed = ti.cast(0.0, self.layout.real)
             for s in range(n_old):
                 if old.partner[s] == j:
                     xi = old.xi[s]
                     if ti.static(self.layout.energy):
                         elastic = old.elastic[s]
-                        spring = old.spring[s]
                     if ti.static(self.layout.rate_state):
                         theta = old.theta[s]
+                        last_slip = old.slip[s]
                     if ti.static(self.layout.crushing):
                         crushed = old.crushed[s]
             carried, gap = self.pair(
-                i, j, p, p_normals, n_p, xi, elastic, spring, theta, crushed, used, dt, serial
+                i,
+                j,
+                p,
+                p_normals,
+                n_p,
+                xi,
+                elastic,
+                theta,
+                last_slip,
+                crushed,
+                used,
+                dt,
+                serial,
             )
             if k < self.layout.slots:
                 nb.nbr_gap[i, k] = self.gap_bound(i, j, ti.cast(gap, ti.f64), path_i)
             if ti.static(self.layout.energy):
                 if carried > used:  # in contact: its memory carries on
-                    severed -= ti.cast(spring, ti.f64)
+                    severed -= ti.cast(elastic, ti.f64)
             used = carried
         if ti.static(self.layout.energy):
             if severed != 0.0:  # most bodies, most steps: no contact ended, no row touched

@@ -68,6 +68,8 @@ class Integrator(Stage):
                 "body_pos",
                 "body_angle",
                 "body_energy",
+                "body_dvel",
+                "body_domega",
                 "status",
                 "body_rot",
                 "world_nbr_stale",
@@ -181,6 +183,9 @@ class Integrator(Stage):
                 if ti.static(self.layout.force_ext):
                     e_w = d.body_energy[i, BodyEnergy.WORK]
                     d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
+            if ti.static(self.layout.energy):  # what the contacts book with next step
+                d.body_dvel[i] = v1 - v0
+                d.body_domega[i] = w1 - w0
             d.body_vel[i] = v1
             d.body_omega[i] = w1
             self.displace(i, ti.cast(dt * v1, ti.f64), dt * w1)

@@ -38,11 +38,11 @@ import numpy as np
 
 from .assemble import Batch, assemble
 from .codes import BodyEnergy, BodyKind, EnergyTerm, ThetaMethod
-from .contact import crush, normal_force, tangential_force
+from .contact import contact_work, crush, normal_force, tangential_damping, tangential_force
 from .drag import water_drag
 from .friction import method_code
 from .geometry import overlap
-from .slip import NEWTON_TOLERANCE, NO_INTERFACE, contact_friction
+from .slip import NEW_CONTACT, NEWTON_TOLERANCE, NO_INTERFACE, contact_friction
 from .state import FORCE_QUANTUM
 
 __all__ = [
@@ -70,19 +70,19 @@ class ContactMemory:
     Attributes:
         xi: tangential spring stretch along the tangent (m).
         area: overlap area at the last step (m^2).
-        elastic: elastic energy stored in the contact (J), normal and tangential.
-        spring: the tangential stick spring's part of ``elastic`` (J): the work done on it,
-            booked as severed (``BodyEnergy.SEVERED``) when the contact ends.
+        elastic: elastic energy the contact holds (J), normal and tangential: booked as
+            severed (``BodyEnergy.SEVERED``) when the contact ends.
         theta: rate-and-state variable; ``slip.NO_INTERFACE`` when the contact has no
-            sliding interface (and for Coulomb).
+            sliding interface (and for Coulomb), ``slip.NEW_CONTACT`` before its first step.
+        slip: the law's slip rate along the tangent (m/s, signed; 0 for Coulomb).
         crushed: overlap area crushed so far (m^2).
     """
 
     xi: float = 0.0
     area: float = 0.0
     elastic: float = 0.0
-    spring: float = 0.0
-    theta: float = NO_INTERFACE
+    theta: float = NEW_CONTACT
+    slip: float = 0.0
     crushed: float = 0.0
 
 
@@ -102,8 +102,8 @@ class ContactForce(NamedTuple):
         torque_owner, torque_partner: about each centroid (N m).
         memory: the contact's new memory (stretch, area, stored elastic energy, theta).
         slip_work: frictional work of the step (J). viscous_work: dashpot work (J).
-        crushing_work: work on the crushed overlap (J). sliding_rate: V of the law (m/s;
-            0 for Coulomb).
+        crushing_work: work on the crushed overlap (J). sliding_rate: V of the law (m/s,
+            signed along the tangent; 0 for Coulomb).
     """
 
     area: float
@@ -151,6 +151,11 @@ def contact_force(
     k_v: float,
     ratio: float,
     law,
+    inv_mass: tuple[float, float],
+    inv_inertia: tuple[float, float],
+    zeta: float = 1.0,
+    dvel: tuple = ((0.0, 0.0), (0.0, 0.0)),
+    domega: tuple[float, float] = (0.0, 0.0),
     memory: ContactMemory | None = None,
     method: int | None = None,
     crushing_force: float | None = None,
@@ -169,9 +174,16 @@ def contact_force(
             (rad/s).
         pos_partner, vel_partner, omega_partner: likewise for the partner.
         dt: time step (s). k_e: N/m^2. k_v: Pa s.
-        ratio: ``k_t / (k_e L)`` and ``c_t / (k_v L)`` (``[ice] tangential_stiffness``).
+        ratio: ``k_t / (k_e L)`` (``[ice] tangential_stiffness``).
         law: the world's friction: a Coulomb mu (float), or a law whose ``contact_row`` the
             rate-and-state contact runs (any law: Coulomb is A = B = 0).
+        inv_mass, inv_inertia: ``1 / m`` (1/kg) and ``1 / I`` (1/(kg m^2)) of owner and
+            partner, 0 for a fixed or kinematic body.
+        zeta: the tangential dashpot's fraction of critical damping
+            (``[ice] tangential_damping``; ``contact.tangential_damping``).
+        dvel, domega: the velocity (m/s) and spin (rad/s) changes of the owner's and the
+            partner's last steps, with which the contact books its work
+            (``contact.contact_work``).
         memory: the contact's memory from the last step, or None for a new contact.
         method: ``codes.ThetaMethod`` for theta; default the law's own method.
         crushing_force: strength x thickness (N/m), or None for no strength.
@@ -204,7 +216,15 @@ def contact_force(
         if crushed > old.crushed and width > 0.0:
             crushing_work = cap_n * (crushed - old.crushed) / width
 
-    k_t, c_t = ratio * k_e * width, ratio * k_v * width
+    k_t = ratio * k_e * width
+    c_t = tangential_damping(
+        k_t,
+        zeta,
+        inv_mass[0],
+        inv_inertia[0] * _cross(r_i, tangent) ** 2,
+        inv_mass[1],
+        inv_inertia[1] * _cross(r_j, tangent) ** 2,
+    )
     theta_new, v = NO_INTERFACE, 0.0
     if isinstance(law, (int, float)):
         mu, theta_new = float(law), 0.0  # no theta is kept
@@ -214,6 +234,8 @@ def contact_force(
         f_trial = abs(k_t * (old.xi + slip * dt) + c_t * slip)
         mu, theta_new, v = contact_friction(
             old.theta,
+            old.slip,
+            slip,
             f_trial,
             f_n,
             k_t * dt + c_t,
@@ -231,11 +253,24 @@ def contact_force(
 
     f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
     force = f_n * normal + f_t * tangent
-    # Elastic energy stored in the contact: the work of its elastic forces (normal on the
-    # approach, less what crushed; tangential at this step's stiffness).
-    spring_work = 0.5 * k_t * (xi_new * xi_new - old.xi * old.xi)
-    elastic = old.elastic + f_el * approach * dt - crushing_work + spring_work
-    viscous = (f_n - f_el) * approach * dt + damp_work
+    # The work of its forces at the bodies' mid-step velocity (``contact.contact_work``).
+    change = (np.asarray(dvel[1], dtype=np.float64) + _spin(domega[1], r_j)) - (
+        np.asarray(dvel[0], dtype=np.float64) + _spin(domega[0], r_i)
+    )
+    held, viscous, friction = contact_work(
+        f_n,
+        f_el,
+        f_t,
+        approach,
+        slip,
+        -float(change @ normal),
+        float(change @ tangent),
+        dt,
+        slip_work,
+        damp_work,
+        0.5 * k_t * (xi_new * xi_new - old.xi * old.xi),
+        crushing_work,
+    )
     return ContactForce(
         area=area,
         point=point,
@@ -254,12 +289,12 @@ def contact_force(
         memory=ContactMemory(
             xi=xi_new,
             area=area,
-            elastic=elastic,
-            spring=old.spring + spring_work,
+            elastic=old.elastic + held,
             theta=theta_new,
+            slip=v,
             crushed=crushed,
         ),
-        slip_work=slip_work,
+        slip_work=friction,
         viscous_work=viscous,
         crushing_work=crushing_work,
         sliding_rate=v,
@@ -292,7 +327,8 @@ class ReferenceModel:
         drag: ``(N, 2)`` water drag coefficients (kg/m, kg m^2), or None with no water.
         laws: the friction of each world, rebuilt from its model columns: a Coulomb mu
             (float) when every world is Coulomb, else a world's rate-and-state columns.
-        k_e (N/m^2), k_v (Pa s): normal contact parameters. ratio: tangential to normal.
+        k_e (N/m^2), k_v (Pa s): normal contact parameters. ratio: tangential to normal
+            stiffness. zeta: the tangential dashpot's fraction of critical damping.
         method: ``codes.ThetaMethod`` for theta (one per batch).
         crushing_force: strength x thickness (N/m), or None.
         tol: Newton's tolerance of the sliding rate.
@@ -310,6 +346,7 @@ class ReferenceModel:
     k_e: float
     k_v: float
     ratio: float
+    zeta: float = 1.0
     method: int = ThetaMethod.EXPONENTIAL
     quantum: float | None = FORCE_QUANTUM
     crushing_force: float | None = None
@@ -318,6 +355,14 @@ class ReferenceModel:
     @property
     def n_bodies(self) -> int:
         return len(self.kind)
+
+    def inv_mass(self, i: int) -> float:
+        """``1 / m`` of body i (1/kg), 0 unless it is dynamic."""
+        return 1.0 / float(self.mass[i]) if self.kind[i] == BodyKind.DYNAMIC else 0.0
+
+    def inv_inertia(self, i: int) -> float:
+        """``1 / I`` of body i (1/(kg m^2)), 0 unless it is dynamic."""
+        return 1.0 / float(self.inertia[i]) if self.kind[i] == BodyKind.DYNAMIC else 0.0
 
     @classmethod
     def from_batch(cls, batch: Batch, quantum: float | None = FORCE_QUANTUM):
@@ -345,6 +390,7 @@ class ReferenceModel:
             k_e=layout.contact_stiffness,
             k_v=layout.contact_viscosity,
             ratio=layout.tangential_stiffness,
+            zeta=layout.tangential_damping,
             method=layout.theta_method,
             quantum=quantum,
             crushing_force=layout.crushing_force if layout.crushing else None,
@@ -364,6 +410,8 @@ class ReferenceState:
     Attributes:
         pos: ``(N, 2)`` m. angle: ``(N,)`` rad. vel: ``(N, 2)`` m/s. omega: ``(N,)`` rad/s.
         contacts: ``{(owner, partner): ContactMemory}`` of the contacts of the last step.
+        dvel: ``(N, 2)`` m/s, domega: ``(N,)`` rad/s: each body's velocity change over its
+            last step (zero before the first).
         body_energy: ``(N, 5)`` cumulative terms per body (J), ``codes.BodyEnergy`` columns.
         time: s.
     """
@@ -375,10 +423,17 @@ class ReferenceState:
     contacts: dict[tuple[int, int], ContactMemory] = field(default_factory=dict)
     body_energy: np.ndarray | None = None
     time: float = 0.0
+    dvel: np.ndarray | None = None
+    domega: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        n = len(self.angle)
         if self.body_energy is None:
-            self.body_energy = np.zeros((len(self.angle), len(BodyEnergy)))
+            self.body_energy = np.zeros((n, len(BodyEnergy)))
+        if self.dvel is None:
+            self.dvel = np.zeros((n, 2))
+        if self.domega is None:
+            self.domega = np.zeros(n)
 
     @classmethod
     def from_batch(cls, batch: Batch) -> ReferenceState:
@@ -405,6 +460,8 @@ class ReferenceState:
             omega=self.omega.copy(),
             contacts=dict(self.contacts),
             body_energy=self.body_energy.copy(),
+            dvel=self.dvel.copy(),
+            domega=self.domega.copy(),
         )
 
 
@@ -472,6 +529,11 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 k_v=model.k_v,
                 ratio=model.ratio,
                 law=model.laws[model.world[i]],
+                inv_mass=(model.inv_mass(i), model.inv_mass(j)),
+                inv_inertia=(model.inv_inertia(i), model.inv_inertia(j)),
+                zeta=model.zeta,
+                dvel=(state.dvel[i], state.dvel[j]),
+                domega=(float(state.domega[i]), float(state.domega[j])),
                 memory=state.contacts.get((i, j)),
                 method=model.method,
                 crushing_force=model.crushing_force,
@@ -485,10 +547,10 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             new.body_energy[i, BodyEnergy.VISCOUS] += c.viscous_work
             new.body_energy[i, BodyEnergy.CRUSHING] += c.crushing_work
             contacts[(i, j)] = c.memory
-    # A contact that ended takes the work its stick spring still held with it.
+    # A contact that ended takes the energy it still held with it.
     for (i, j), mem in state.contacts.items():
         if (i, j) not in contacts:
-            new.body_energy[i, BodyEnergy.SEVERED] += mem.spring
+            new.body_energy[i, BodyEnergy.SEVERED] += mem.elastic
     new.contacts = contacts
 
     for i in range(n):
@@ -511,6 +573,8 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
             new.body_energy[i, BodyEnergy.DRAG] += -(float(f_drag @ vm) + t_drag * wm) * dt
             new.body_energy[i, BodyEnergy.WORK] += float(f_ext @ vm) * dt
+            new.dvel[i] = v1 - v0
+            new.domega[i] = w1 - w0
             new.vel[i] = v1
             new.omega[i] = w1
             new.pos[i] = state.pos[i] + dt * v1

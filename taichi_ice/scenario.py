@@ -98,6 +98,7 @@ _ICE_KEYS = (
     "contact_stiffness",
     "contact_viscosity",
     "tangential_stiffness",
+    "tangential_damping",
     "crushing_strength",
 )
 _WATER_KEYS = ("density", "form_drag", "skin_drag")
@@ -339,6 +340,7 @@ def _parse_ice(source: str, data: Any) -> IceProperties:
         tangential_stiffness=t.number(
             "tangential_stiffness", d.tangential_stiffness, positive=True
         ),
+        tangential_damping=t.number("tangential_damping", d.tangential_damping, positive=True),
         crushing_strength=t.number("crushing_strength", None, positive=True, unit=" Pa"),
     )
 

@@ -93,9 +93,11 @@ class IceProperties:
         thickness: floe thickness, m.
         contact_stiffness: ``k_e``, N/m per m of contact width.
         contact_viscosity: ``k_v``, Pa s per m of contact width.
-        tangential_stiffness: ratio ``k_t / k_e`` (and ``c_t / k_v``) of the tangential stick
-            spring (and dashpot) to the normal ones, dimensionless; a contact of width L has
-            ``k_t = ratio k_e L``.
+        tangential_stiffness: ratio ``k_t / k_e`` of the tangential stick spring to the normal
+            one, dimensionless; a contact of width L has ``k_t = ratio k_e L``.
+        tangential_damping: the tangential dashpot as a fraction of critical damping of the
+            stick spring at the pair's mass along the tangent (1: critical, no overshoot;
+            ``contact.tangential_damping``), dimensionless.
         crushing_strength: the ice's strength (Pa), or None (default: no limit). A contact's
             normal elastic force is capped at strength x thickness x contact width; overlap
             beyond the cap is crushed, not recovered, and its work is the budget's
@@ -107,6 +109,7 @@ class IceProperties:
     contact_stiffness: float = 9.75e7
     contact_viscosity: float = 3.16e4
     tangential_stiffness: float = 0.5
+    tangential_damping: float = 1.0
     crushing_strength: float | None = None
 
 
@@ -356,7 +359,13 @@ class Scene:
         ice = self.ice
         outlines = (b.vertices for b in self.bodies if b.kind == _DYNAMIC)
         return stable_time_step(
-            outlines, ice.density, ice.thickness, ice.contact_stiffness, ice.contact_viscosity
+            outlines,
+            ice.density,
+            ice.thickness,
+            ice.contact_stiffness,
+            ice.contact_viscosity,
+            ice.tangential_stiffness,
+            ice.tangential_damping,
         )
 
     @cached_property

@@ -145,7 +145,7 @@ def _law_params():
             "i32",
             ("n_worlds",),
             "",
-            "rate-and-state: 1 if contacts carry theta, 0 (steady-state law, Coulomb) if not",
+            "rate-and-state: 1 if contacts carry theta, 0 (Coulomb) if not",
             role="cold",
             when="rate_state",
             init=HOST,
@@ -198,12 +198,14 @@ DATA: tuple[Var, ...] = (
     Var("body_force_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "contact force gathered this step, fixed point", lanes=2),
     Var("body_torque_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "contact torque gathered this step, fixed point"),
     Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic", when="energy"),
+    Var("body_dvel", "real", ("n_bodies",), "m/s", "velocity change of the body's last step: the contacts book their work at v + dv / 2 (contact.contact_work)", lanes=2, when="energy"),
+    Var("body_domega", "real", ("n_bodies",), "rad/s", "angular velocity change of the body's last step", when="energy"),
     Var("contact_partner", "i32", ("n_bodies", "slots"), "id", "partner body of each slot, -1 if empty", init=-1),
     Var("contact_count", "i32", ("n_bodies",), "", "used slots of each body"),
     Var("contact_xi", "real", ("n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
-    Var("contact_elastic", "real", ("n_bodies", "slots"), "J", "elastic energy stored in the contact: work of its normal and tangential springs", role="diagnostic", when="energy"),
-    Var("contact_spring", "real", ("n_bodies", "slots"), "J", "the tangential stick spring's part of contact_elastic (booked as severed when the contact ends)", role="diagnostic", when="energy"),
+    Var("contact_elastic", "real", ("n_bodies", "slots"), "J", "elastic energy the contact holds: work of its normal and tangential springs (booked as severed when the contact ends)", role="diagnostic", when="energy"),
     Var("contact_theta", "real", ("n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
+    Var("contact_slip", "real", ("n_bodies", "slots"), "m/s", "slip rate of the law along the tangent (signed: a change of sign ends the interface); 0 if stuck", when="rate_state"),
     Var("contact_crushed", "real", ("n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
     Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic", when="energy"),
     Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
@@ -283,8 +285,10 @@ class Layout:
         theta_method: ``codes.ThetaMethod`` of the state variable (one per batch).
         contact_stiffness: ``k_e``, N/m per m of contact width (shared by the batch).
         contact_viscosity: ``k_v``, Pa s per m of contact width.
-        tangential_stiffness: ratio of the tangential stick spring and dashpot to the normal
-            ones; a contact of width L has ``k_t = ratio k_e L``, ``c_t = ratio k_v L``.
+        tangential_stiffness: ratio of the tangential stick spring to the normal one; a
+            contact of width L has ``k_t = ratio k_e L``.
+        tangential_damping: the tangential dashpot as a fraction of critical damping of the
+            stick spring at the pair's mass along the tangent (``contact.tangential_damping``).
         crushing: the ice's strength caps the normal force (``[ice] crushing_strength``).
         crushing_force: strength x thickness (N per m of contact width): the cap is this
             times the contact width.
@@ -316,6 +320,7 @@ class Layout:
     contact_stiffness: float
     contact_viscosity: float
     tangential_stiffness: float
+    tangential_damping: float
     crushing: bool
     crushing_force: float
     runaway_speed: float

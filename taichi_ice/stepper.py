@@ -47,8 +47,10 @@ class WorldStepper(Stage):
         "run": Access(
             reads=(
                 "body_angle",
+                "body_domega",
                 "body_drag_linear",
                 "body_drag_rotational",
+                "body_dvel",
                 "body_energy",
                 "body_force_ext",
                 "body_force_q",
@@ -70,7 +72,7 @@ class WorldStepper(Stage):
                 "contact_crushed",
                 "contact_elastic",
                 "contact_partner",
-                "contact_spring",
+                "contact_slip",
                 "contact_theta",
                 "contact_xi",
                 "nbr_count",
@@ -97,6 +99,8 @@ class WorldStepper(Stage):
             ),
             writes=(
                 "body_angle",
+                "body_domega",
+                "body_dvel",
                 "body_energy",
                 "body_force_q",
                 "body_omega",
@@ -108,7 +112,7 @@ class WorldStepper(Stage):
                 "contact_crushed",
                 "contact_elastic",
                 "contact_partner",
-                "contact_spring",
+                "contact_slip",
                 "contact_theta",
                 "contact_xi",
                 "nbr_count",

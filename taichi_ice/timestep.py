@@ -1,15 +1,20 @@
 """The stable time step of the explicit contact integration.
 
 A contact is a spring ``k = k_e L`` (``k_e`` the contact stiffness per metre of contact
-width, ``L`` the contact width) with a dashpot ``c = k_v L`` between two bodies. Semi-implicit
-(symplectic) Euler integrates a damped oscillator ``m x'' + c x' + k x = 0`` stably for
+width, ``L`` the contact width) with a dashpot ``c = k_v L`` between two bodies, and along
+the tangent a stick spring ``k_t = r k_e L`` with a dashpot that damps it to ``zeta`` of
+critical (``contact.tangential_damping``). Semi-implicit (symplectic) Euler integrates a
+damped oscillator ``m x'' + c x' + k x = 0`` stably for
 
     dt < (2 / w) (sqrt(1 + z^2) - z),   w = sqrt(k / m_eff),   z = c / (2 sqrt(k m_eff)),
 
-(the undamped limit 2/w, lowered by the explicit dashpot). The stiffest contact is the widest
-one a body's edge allows (``L`` = its longest edge) and the lightest effective mass is that
-of two such bodies hit at their farthest corner, where rotation makes them feel lighter:
-``1 / m_eff = 2 (1 / m + R^2 / I)``, ``R`` the circumradius about the centroid.
+(the undamped limit 2/w, lowered by the explicit dashpot; the tangential step, whose trial
+stretch takes the start-of-step slip, has the same limit). The stiffest contact is the
+widest one a body's edge allows (``L`` = its longest edge) and the lightest effective mass
+is that of two such bodies hit at their farthest corner, where rotation makes them feel
+lighter: ``1 / m_eff = 2 (1 / m + R^2 / I)``, ``R`` the circumradius about the centroid. The
+limit is the smaller of the normal and the tangential oscillator's: at the defaults
+(``r = 0.5``, ``zeta = 1``) the tangential one, ``0.83 / w_t`` with ``w_t = sqrt(r) w``.
 """
 
 from __future__ import annotations
@@ -28,8 +33,21 @@ from .geometry import longest_edge, mass_properties
 DEFAULT_SAFETY = 0.2
 
 
+def oscillator_limit(k: float, c: float, m_eff: float) -> float:
+    """Largest stable step (s) of symplectic Euler on ``m_eff x'' + c x' + k x = 0``."""
+    w = math.sqrt(k / m_eff)
+    z = c / (2.0 * math.sqrt(k * m_eff))
+    return (2.0 / w) * (math.sqrt(1.0 + z * z) - z)
+
+
 def body_contact_limit(
-    vertices: np.ndarray, density: float, thickness: float, stiffness: float, viscosity: float
+    vertices: np.ndarray,
+    density: float,
+    thickness: float,
+    stiffness: float,
+    viscosity: float,
+    tangential_stiffness: float = 0.5,
+    tangential_damping: float = 1.0,
 ) -> float:
     """Stability limit (s) of the stiffest contact between two copies of one dynamic body.
 
@@ -38,6 +56,8 @@ def body_contact_limit(
         density: ice density (kg/m^3). thickness: ice thickness (m).
         stiffness: contact stiffness ``k_e`` (N/m per m of contact width).
         viscosity: contact viscosity ``k_v`` (Pa s per m of contact width).
+        tangential_stiffness: ``k_t / (k_e L)``. tangential_damping: the tangential dashpot's
+            fraction of critical damping.
     """
     area, centroid, polar = mass_properties(vertices)
     mass = density * thickness * area
@@ -46,11 +66,10 @@ def body_contact_limit(
     radius = float(np.max(np.hypot(rel[:, 0], rel[:, 1])))
     width = longest_edge(rel)
     m_eff = 1.0 / (2.0 * (1.0 / mass + radius * radius / inertia))
-    k = stiffness * width
-    c = viscosity * width
-    w = math.sqrt(k / m_eff)
-    z = c / (2.0 * math.sqrt(k * m_eff))
-    return (2.0 / w) * (math.sqrt(1.0 + z * z) - z)
+    normal = oscillator_limit(stiffness * width, viscosity * width, m_eff)
+    k_t = tangential_stiffness * stiffness * width
+    tangential = oscillator_limit(k_t, 2.0 * tangential_damping * math.sqrt(k_t * m_eff), m_eff)
+    return min(normal, tangential)
 
 
 def stable_time_step(
@@ -59,8 +78,11 @@ def stable_time_step(
     thickness: float,
     stiffness: float,
     viscosity: float,
+    tangential_stiffness: float = 0.5,
+    tangential_damping: float = 1.0,
 ) -> float:
-    """Largest stable dt (s) over the outlines of a scene's dynamic bodies.
+    """Largest stable dt (s) over the outlines of a scene's dynamic bodies (the arguments
+    of ``body_contact_limit``).
 
     Returns ``inf`` when there is no dynamic body (nothing to integrate).
     """
@@ -72,5 +94,16 @@ def stable_time_step(
         if key in seen:  # a lattice repeats one outline thousands of times
             continue
         seen.add(key)
-        limit = min(limit, body_contact_limit(v, density, thickness, stiffness, viscosity))
+        limit = min(
+            limit,
+            body_contact_limit(
+                v,
+                density,
+                thickness,
+                stiffness,
+                viscosity,
+                tangential_stiffness,
+                tangential_damping,
+            ),
+        )
     return limit

@@ -41,8 +41,8 @@ def test_worlds_that_cannot_share_kernels_are_refused(pushed):
 
 def test_laws_mix_in_one_batch_each_with_its_own_row(pushed):
     """Coulomb, rate-and-state and its variants share a batch; each world's columns are its
-    law's: Coulomb as A = B = 0 with mu0 = mu and no memory, the steady-state law without
-    memory, memory-only with B = A, the rest rule as its code."""
+    law's: Coulomb as A = B = 0 with mu0 = mu and no memory, the steady-state law with its
+    short t_c, memory-only with B = A, the rest rule as its code."""
     laws = [
         Coulomb(0.3),
         RateState(below_v_star="healing"),
@@ -53,7 +53,8 @@ def test_laws_mix_in_one_batch_each_with_its_own_row(pushed):
     assert host["world_mu0"].tolist() == [0.3, 0.872, 0.872, 0.872]
     assert host["world_A"].tolist() == [0.0, 0.05, 0.05, 0.07]
     assert host["world_B"].tolist() == [0.0, 0.112, 0.2, 0.07]
-    assert host["world_memory"].tolist() == [0, 1, 0, 1]
+    assert host["world_memory"].tolist() == [0, 1, 1, 1]
+    assert host["world_t_c"].tolist() == [1.0, 3.0, 0.1, 3.0]
     assert host["world_rest_rule"].tolist() == [
         RestRule.PAPER,
         RestRule.HEALING,

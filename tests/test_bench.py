@@ -88,7 +88,8 @@ def test_cli_writes_csv_json_and_chart(tmp_path):
     assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
     # Like Box2D, the timed runs keep no energy budget unless asked: with it, each body also
-    # holds its budget columns and two reals per contact slot (f64).
+    # holds its budget columns, its last velocity change (three reals: the contacts book their
+    # work at the mid-step velocity) and a real per contact slot (f64).
     assert row["energy"] == "0"
     kept = tmp_path / "kept"
     assert main([*argv, "--energy", "--warm-cache", "--quick", "--out", str(kept)]) == 0
@@ -98,7 +99,7 @@ def test_cli_writes_csv_json_and_chart(tmp_path):
     slots = record["runs"][0]["layout"]["slots"]
     extra = float(kept_row["field_bytes_per_block"]) - float(row["field_bytes_per_block"])
     bodies_per_block = int(row["bodies"]) / int(row["blocks"])
-    per_body = (len(BodyEnergy) + 2 * slots) * 8
+    per_body = (len(BodyEnergy) + slots + 3) * 8
     assert extra == pytest.approx(bodies_per_block * per_body, rel=0.01)
 
 

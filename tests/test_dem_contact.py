@@ -2,7 +2,8 @@
 
 A block on a kinematic floor whose speed steps from 0.1 to 1 mm/s: F_t / F_n on the block
 against the exact step response; and a block that slid to a stop, then loaded sideways at
-0.8 and 1.2 mu0 F under the paper's rule: it holds, then slides at (1.2 mu0 - mu) F / m.
+0.8 and 1.2 mu0 F under the paper's rule: it holds, then slides off at (1.2 mu0 - mu) F / m,
+its mu the law's along its slip.
 """
 
 from __future__ import annotations
@@ -19,31 +20,30 @@ from taichi_ice.studies.single_interface import profiles
 
 # The step profile of Figure 3, shortened (jump at 2 s, 8 s in all), at 20 ms steps.
 STEP_DT = 0.02
-# Where the DEM's mu differs from the exact step response (measured 3.9e-7): the jump falls
-# on a step boundary and the exponential update is exact at constant V, so nothing of
-# order dt / t_c remains; what does is the start-up. In its first step the new contact's
-# stick spring takes up mu F_n / k_t = 7.3e-12 m of the floor's V0 dt = 2e-6 m, so the
-# interface starts in equilibrium at a rate 3.6e-6 low and keeps B x 3.6e-6 = 4.1e-7 of it,
-# decaying over t_c. 2e-6 allows five times that; a slip rate taken a step late would miss
-# the jump's A ln 10 = 0.115 at one sample, and half a step of lag in theta would leave
-# B ln(10) dt / (2 t_c) = 9e-4.
-STEP_TOL = 2e-6
-# The sliding rate is the floor speed less the stick spring's stretching rate,
-# (F_n / k_t) dmu/dt. After the start-up its largest departure is at the jump, where the
-# spring takes up the jump in mu, A ln 10 F_n / k_t = 1.2e-12 m, in one step: 6e-11 m/s
-# (measured 5.6e-11). 1e-9 m/s is a hundredth of the 1e-7 m/s this set-up aims at.
-SLIDE_RATE_ATOL = 1e-9  # m/s
+# Where the DEM's mu differs from the exact step response (measured 5.7e-9): the jump falls
+# on a step boundary and the exponential update is exact at constant V, so nothing of order
+# dt / t_c remains, and the new contact starts its interface at the floor's speed (its slip
+# rate is capped at the surfaces' speed: 3.9e-7 before, when its first step started it at
+# the sliding rate, 3.6e-6 slow). What remains is the fixed-point gather of the forces,
+# 2^-24 N on F_n = 9.75 N and on F_t: up to (1 + mu) 6e-9. 2e-8 allows that; a slip rate
+# taken a step late would miss the jump's A ln 10 = 0.115 at one sample, and half a step of
+# lag in theta would leave B ln(10) dt / (2 t_c) = 9e-4.
+STEP_TOL = 2e-8
+# The slip rate is the sliding rate capped at the surfaces' speed: here the floor's speed
+# less the block's drift (3e-22 m/s), so only round-off is left (measured 1.2e-17 m/s; the
+# sliding rate alone departed by 6e-11 at the jump, where the spring takes up the jump in mu).
+SLIDE_RATE_ATOL = 1e-12  # m/s
 # The block under 0.8 mu0 F: the contact's slip stays below the creep that the paper's rule
-# allows below v_star, v_star x (ramp + observation) = 6 um (measured 0.33 um); the base moves
-# by the stick spring's stretch, 2.2 mu0 F / k_t measured (the tilted block rests on a
-# narrower contact, whose k_t = ratio k_e L is softer, and rocks).
-HOLD_BASE_FACTOR = 3.0
+# allows below v_star, v_star x (ramp + observation) = 6 um (measured 0.01 um); the base moves
+# by the stick spring's stretch, 0.8 mu0 F / k_t measured (a critically damped spring takes
+# the load without overshoot).
+HOLD_BASE_FACTOR = 1.0
 # The slide's mean acceleration against (1.2 mu0 - mu_contact) F / m, mu_contact the mean
-# F_t / F_n over the window: they differ by mu (F - F_n) / m, the normal force of the
-# rocking block (measured 7e-4 relative).
+# F_t / F_n over the window: Newton's law with the forces the contact gave (measured 4e-4
+# relative: the probe's impulses and the velocities are sampled every 5 steps).
 SLIDE_ACCELERATION_RTOL = 0.01
 # The contact's mu against the law integrated along the block's sampled slip from the
-# contact's theta (measured 8e-4: samples every 5 steps, rocking).
+# contact's theta (measured 4e-4: samples every 5 steps).
 SLIDE_MU_ATOL = 5e-3
 
 
@@ -97,8 +97,14 @@ def test_paper_rule_block_holds_at_0_8_and_slides_at_1_2(f64):
     assert hold["held"] and not hold["interface_under_load"]
     assert hold["max_contact_slip_m"] < setup["held_if_contact_slips_less_than_m"]
     assert hold["max_base_displacement_over_mu0F_kt"] < HOLD_BASE_FACTOR
-    assert not slide["held"] and slide["max_base_displacement_m"] > 0.1
+    # Sliding: the contact starts from rest, so the direct effect raises mu with the slip
+    # rate (to ~1.05 here) and the block creeps off, accelerating as theta relaxes over t_c:
+    # 0.4 mm in the 0.5 s observed, sixty times the creep the paper's rule allows.
+    assert not slide["held"] and slide["interface_under_load"]
+    assert slide["max_contact_slip_m"] > 10 * setup["held_if_contact_slips_less_than_m"]
+    assert slide["final_speed_m_s"] > slide["slide"]["speed_range_m_s"][0] > 0.0
     s = slide["slide"]
+    assert s["acceleration"] > 0.0
     assert s["acceleration"] == pytest.approx(
         s["closed_form_acceleration"], rel=SLIDE_ACCELERATION_RTOL
     )

@@ -111,7 +111,8 @@ def test_docs_state_table_is_generated_from_the_schema():
 def test_traffic_model_counts_the_integrator_by_hand():
     """integrator.advance moves, per body and f64: reads 10 scalars, 4 vectors, the i64 force
     and torque, 6 energy terms and what the lists' staleness needs; writes back the same
-    minus the model, plus the body's rotation and path, the status and the stale flags."""
+    minus the model, plus the body's velocity change, rotation and path, the status and the
+    stale flags."""
     batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
     layout = batch.layout.replace(n_bodies=1000, n_probes=0, water=False, force_ext=True)
     n = layout.n_bodies
@@ -123,8 +124,9 @@ def test_traffic_model_counts_the_integrator_by_hand():
     lists = 4 + 4 + 8 + 16 + 8 + 8
     body = 4 + 4 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 48 + lists
     reads = n * body + 8
-    # writes: force_q, torque_q, vel, omega, pos, angle, energy; the rotation (cos, sin);
+    # writes: force_q, torque_q, vel, omega, pos, angle, energy; the velocity changes that
+    # the contacts book their work with (dvel 2 x f64, domega); the rotation (cos, sin);
     # the path; status (4 x i32); the stale flags (one world, and the batch's).
-    writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 48 + 16 + 8) + 16 + 4 + 4
+    writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 48 + 16 + 8 + 16 + 8) + 16 + 4 + 4
     got = schema.traffic({"integrator": STAGES["integrator"]}, layout, contacts=0)
     assert got["integrator.advance"] == reads + writes

@@ -12,25 +12,25 @@ bodies (no water, no external force):
     F_n   = max(k_e A + k_v L v_n, 0)                     normal, no tension
     F_try = -k_t xi - c_t s                               the tangential force if stuck
     stuck:   |F_try| <= mu F_n:   F_t = F_try,             xi' = s
-    sliding: F_t = sign(F_try) mu F_n,  xi' = (-F_t - k_t xi) / c_t,  V = |s - xi'|
+    sliding: F_t = sign(F_try) mu F_n,  xi' = (-F_t - k_t xi) / c_t
 
-``k_t = r k_e L``, ``c_t = r k_v L`` (``r`` the ice's ``tangential_stiffness``), ``s`` the
-tangential speed of the partner at the contact point, ``V`` the sliding rate. The DEM's
-step (``contact.tangential_force``: a trial stretch, then a backward-Euler relaxation to the
-cap) tends to exactly this as dt -> 0.
+``k_t = r k_e L`` (``r`` the ice's ``tangential_stiffness``), ``c_t = 2 zeta sqrt(k_t m_t)``
+(``zeta`` its ``tangential_damping``, ``m_t`` the pair's mass along the tangent at the
+contact point: ``contact.tangential_damping``), ``s`` the tangential speed of the partner
+at the contact point. The DEM's step (``contact.tangential_force``: a trial stretch, then a
+backward-Euler relaxation to the cap) tends to exactly this as dt -> 0.
 
 Rate and state with the paper's rule below ``v_star`` (``slip.contact_friction``, continuous):
-a contact with no interface holds at ``mu0``; it starts sliding when
-``|F_try| > c_t v_star + mu0 F_n``, as a new interface in equilibrium at its sliding rate:
-``theta = -B ln(V0 / v_star)`` with V0 the largest root of
-``c_t V0 + (mu0 + (A - B) ln(V0 / v_star)) F_n = |F_try|`` (velocity weakening makes that
-root far above v_star: the static-kinetic drop; the DEM's Newton iteration, started above,
-takes the same root); while it slides ``mu = max(mu0 + theta + A ln(V / v_star), 0)`` with
-V solved from ``c_t V + mu(V) F_n = |F_try|``, and
-``theta' = -(theta + B ln(V / v_star)) / t_c``; the interface ends when
-``|F_try| <= c_t v_star + max(mu0 + theta, 0) F_n`` (V would fall below v_star). Both
-switches are located as events and the integration restarts in the new mode. A contact's
-memory (``xi``, ``theta``) is dropped when the pair separates.
+the slip rate is the sliding rate, never faster than the surfaces,
+``V = min(V_slide, |s|)``, ``V_slide`` solving ``c_t V + mu(V) F_n = |F_try|``; while the
+contact slides ``mu = max(mu0 + theta + A ln(V / v_star), 0)`` and
+``theta' = -(theta + B ln(V / v_star)) / t_c``. A contact that slides from its first touch
+is a new interface in equilibrium at its rate, ``theta = -B ln(V0 / v_star)``; one at rest
+holds at ``mu0`` until ``|F_try| > c_t v_star + mu0 F_n`` and then starts from rest, in
+equilibrium at v_star (theta = 0); the interface ends when V falls below v_star (the
+sliding rate, ``|F_try| <= c_t v_star + max(mu0 + theta, 0) F_n``, or the surfaces'
+speed, ``|s| <= v_star``). Each switch is located as an event and the integration restarts
+in the new mode. A contact's memory (``xi``, ``theta``) is dropped when the pair separates.
 """
 
 from __future__ import annotations
@@ -55,8 +55,8 @@ FRESH, SLIDING = 0, 1
 @dataclass
 class Pair:
     """Two dynamic bodies: outlines (centroid-relative, ``(n, 2)``), masses (kg), inertias
-    (kg m^2), and the contact parameters: ``k_e``, ``k_v``, ``ratio``; the law's parameters
-    (``mu`` for Coulomb; ``A, B, mu0, v_star, t_c`` for rate and state)."""
+    (kg m^2), and the contact parameters: ``k_e``, ``k_v``, ``ratio``, ``zeta``; the law's
+    parameters (``mu`` for Coulomb; ``A, B, mu0, v_star, t_c`` for rate and state)."""
 
     outlines: tuple[np.ndarray, np.ndarray]
     mass: np.ndarray
@@ -64,6 +64,7 @@ class Pair:
     k_e: float
     k_v: float
     ratio: float
+    zeta: float
     law: Any
 
     @classmethod
@@ -82,6 +83,7 @@ class Pair:
             k_e=scene.ice.contact_stiffness,
             k_v=scene.ice.contact_viscosity,
             ratio=scene.ice.tangential_stiffness,
+            zeta=scene.ice.tangential_damping,
             law=law,
         )
 
@@ -132,10 +134,26 @@ class ContactRHS:
         t = np.array([-n[1], n[0]])
         approach, slip = -float(v_rel @ n), float(v_rel @ t)
         f_n = max(pair.k_e * ov.area + pair.k_v * ov.width * approach, 0.0)
-        k_t, c_t = pair.ratio * pair.k_e * ov.width, pair.ratio * pair.k_v * ov.width
+        k_t = pair.ratio * pair.k_e * ov.width
+        inv_m = (
+            1.0 / pair.mass[0]
+            + _cross(r0, t) ** 2 / pair.inertia[0]
+            + 1.0 / pair.mass[1]
+            + _cross(r1, t) ** 2 / pair.inertia[1]
+        )
+        c_t = 2.0 * pair.zeta * math.sqrt(k_t / inv_m)
         xi, theta = y[12], y[13]
         f_try = -k_t * xi - c_t * slip
-        out = {"r0": r0, "r1": r1, "n": n, "t": t, "f_n": f_n, "f_try": f_try, "c_t": c_t}
+        out = {
+            "r0": r0,
+            "r1": r1,
+            "n": n,
+            "t": t,
+            "f_n": f_n,
+            "f_try": f_try,
+            "c_t": c_t,
+            "slip": slip,
+        }
         law = pair.law
         if not pair.rate_state:
             mu, rate = law.mu, 0.0
@@ -143,6 +161,8 @@ class ContactRHS:
             mu, rate = law.mu0, 0.0
         else:
             y_log = _sliding_log_rate(abs(f_try), f_n, c_t, theta, law)
+            if abs(slip) > law.v_star:  # never faster than the surfaces
+                y_log = min(y_log, math.log(abs(slip) / law.v_star))
             mu = max(law.mu0 + theta + law.A * y_log, 0.0)
             rate = -(theta + law.B * y_log) / law.t_c
         cap = mu * f_n
@@ -189,7 +209,15 @@ class ContactRHS:
 
         switch.terminal = True
         switch.direction = 1 if self.mode == FRESH else -1
-        return [separate, switch]
+        if self.mode == FRESH:
+            return [separate, switch]
+
+        def surfaces(_t, y):  # the surfaces slow below v_star (on the way to a reversal)
+            c = self.contact(y)
+            return -1.0 if c is None else abs(c["slip"]) - law.v_star
+
+        surfaces.terminal, surfaces.direction = True, -1
+        return [separate, switch, surfaces]
 
 
 def _sliding_log_rate(f_try: float, f_n: float, c_t: float, theta: float, law) -> float:
@@ -216,23 +244,24 @@ def _sliding_log_rate(f_try: float, f_n: float, c_t: float, theta: float, law) -
 
 
 def _new_interface_theta(pair: Pair, c: dict[str, Any] | None) -> float:
-    """theta of a new interface: ``-B y0``, ``y0`` the largest root of ``c_t v_star e^y +
-    max(mu0 + (A - B) y, 0) F_n = |F_try|`` (0 if there is none above y = 0)."""
+    """theta of a contact that slides from its first touch: ``-B y0``, ``y0 = ln(V0 /
+    v_star)`` with V0 its slip rate, the largest root of ``c_t v_star e^y + max(mu0 + (A -
+    B) y, 0) F_n = |F_try|`` capped at the surfaces' speed ``|s|``."""
     law = pair.law
-    if c is None or c["c_t"] <= 0.0 or c["f_n"] <= 0.0:
+    if c is None or c["c_t"] <= 0.0 or abs(c["slip"]) <= law.v_star:
         return 0.0
     f_try, f_n, c_t = abs(c["f_try"]), c["f_n"], c["c_t"]
+    cap = math.log(abs(c["slip"]) / law.v_star)
 
     def h(y):
         return (
             c_t * law.v_star * math.exp(y) + max(law.mu0 + (law.A - law.B) * y, 0.0) * f_n - f_try
         )
 
-    # h is convex; its minimum is where the exponential's slope meets the weakening.
-    lo = math.log(max(f_n * (law.B - law.A) / (c_t * law.v_star), 1.0))
-    hi = math.log(f_try / (c_t * law.v_star))  # h(hi) >= 0
-    if h(lo) >= 0.0 or hi <= lo:
-        return 0.0
+    if h(cap) <= 0.0:
+        return -law.B * cap
+    # h is convex with h(0) < 0 < h(cap): one root between.
+    lo, hi = 0.0, cap
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         if h(mid) < 0.0:
@@ -299,6 +328,14 @@ def solve_collision(scene, t_end: float) -> dict[str, Any]:
         touch = t
         y[12], y[13] = 0.0, 0.0  # a new contact: no stretch, no interface
         mode = FRESH
+        if pair.rate_state:
+            # Sliding from its first touch (no normal force yet, the dashpot's |F_try| above
+            # c_t v_star): a new interface in equilibrium at its rate.
+            first = ContactRHS(pair, FRESH).contact(_free(pair, y, 1e-12))
+            if first is not None and abs(first["slip"]) > pair.law.v_star:
+                y[13] = _new_interface_theta(pair, first)
+                mode = SLIDING
+                switches += 1
         while True:
             rhs = ContactRHS(pair, mode)
             sol = solve_ivp(
@@ -321,8 +358,8 @@ def solve_collision(scene, t_end: float) -> dict[str, Any]:
             if sol.t_events[0].size:  # separated
                 contacts.append((touch, t))
                 break
-            # The interface started (theta in equilibrium at its sliding rate) or ended.
-            y[13] = _new_interface_theta(pair, rhs.contact(y)) if mode == FRESH else 0.0
+            # The interface started from rest (in equilibrium at v_star: theta = 0) or ended.
+            y[13] = 0.0
             mode = SLIDING if mode == FRESH else FRESH
             switches += 1
         if sol.status == 0:

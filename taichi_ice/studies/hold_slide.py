@@ -1,7 +1,8 @@
 """The DEM-contact validation's second part: a block slides, stops, then holds or slides.
 
-A block pressed onto a fixed floor slides with an initial speed until it stops; then a
-horizontal load ramps to 0.8 or 1.2 mu0 F and is held. Under the paper's rule (mu = mu0
+A block (4 m x 0.25 m: long and low, so that no load here tips it) pressed onto a fixed
+floor slides with an initial speed until it stops; then a horizontal load ramps to 0.8 or
+1.2 mu0 F and is held. Under the paper's rule (mu = mu0
 below v_star) the first holds and the second slides with acceleration (1.2 - mu) F / m;
 under ``healing`` and ``frozen`` the contact is left weak by the slide. ``dem_contact.run``
 runs it and writes the results into ``dem_contact.json``.
@@ -21,6 +22,10 @@ from ..slip import NO_INTERFACE
 
 BLOCK = 1  # body index of the block (the floor is 0)
 PRESS = 2707.56  # N: the block's weight (920 kg/m^3 x 0.3 m x 1 m^2 x 9.81 m/s^2)
+# The block (m): 1 m^2 of ice, long and low. (A 1 m square pulled at its centroid by 1.2 mu0
+# F, more than it is pressed with, tips over its leading corner once its friction rises with
+# the slip rate, as it does when a contact starts from rest.)
+WIDTH, HEIGHT = 4.0, 0.25
 V0 = 0.05  # m/s: initial speed of the block
 HOLD_AT = 0.5  # s: the horizontal load starts (the block stopped by ~0.02 s)
 RAMP = 0.1  # s: the load ramps from 0 to its value over this time
@@ -36,7 +41,8 @@ SLIDE_SETTLE = 0.05
 
 
 def block_scene(law: RateState, v0: float = V0, press: float = PRESS):
-    """``scenarios/sliding_block.toml``'s block on a fixed floor, with ``law``."""
+    """A block of ``scenarios/sliding_block.toml``'s mass, long and low, on a fixed floor,
+    with ``law``."""
     from ..scenario import scene_from_dict
 
     return scene_from_dict(
@@ -48,16 +54,16 @@ def block_scene(law: RateState, v0: float = V0, press: float = PRESS):
                     "name": "floor",
                     "kind": "fixed",
                     "shape": "rectangle",
-                    "width": 6.0,
+                    "width": 40.0,
                     "length": 0.5,
-                    "position": [2.0, -0.25],  # top face at y = 0
+                    "position": [15.0, -0.25],  # top face at y = 0
                 },
                 {
                     "name": "block",
                     "shape": "rectangle",
-                    "width": 1.0,
-                    "length": 1.0,
-                    "position": [0.0, 0.5],
+                    "width": WIDTH,
+                    "length": HEIGHT,
+                    "position": [0.0, 0.5 * HEIGHT],
                     "velocity": [v0, 0.0],
                     "force": [0.0, -press],
                     "probe": True,
@@ -89,7 +95,7 @@ def hold_slide(
     dt = world.dt
     mass = float(scenes[0].masses[BLOCK])
     ice = scenes[0].ice
-    k_t = ice.tangential_stiffness * ice.contact_stiffness * 1.0  # L = 1 m, the block's base
+    k_t = ice.tangential_stiffness * ice.contact_stiffness * WIDTH  # L: the block's base
     blocks = [s.start + BLOCK for s in world.world_slices()]
     n_hold, n_ramp, n_obs = (round(T / dt) for T in (HOLD_AT, RAMP, OBSERVE))
     n = n_hold + n_ramp + n_obs
@@ -119,8 +125,8 @@ def hold_slide(
     # The base (every point of it moves alike along x to first order in the tilt) and the
     # contact's slip: the base's displacement less what the stick spring took up (xi < 0
     # when the block moves +x over the floor, its only contact).
-    base_x = r["x"] + 0.5 * np.sin(r["angle"])
-    base_v = r["v"] + 0.5 * r["omega"] * np.cos(r["angle"])
+    base_x = r["x"] + 0.5 * HEIGHT * np.sin(r["angle"])
+    base_v = r["v"] + 0.5 * HEIGHT * r["omega"] * np.cos(r["angle"])
     slipped = base_x + r["xi"]
     i0 = int(np.searchsorted(t, HOLD_AT - 1e-9 * dt)) - 1  # last sample before the load
     loaded = t > HOLD_AT

@@ -1,0 +1,112 @@
+"""The energy budget closes for every law, and its residual shrinks with dt (``budget``).
+
+A conservation law is the reference: what came in (the energy held at t = 0 and the work of
+the pusher) equals what is held (kinetic, elastic) plus what was dissipated (friction,
+dashpots, drag, crushing, and what contacts held when they ended), up to the residual of
+the explicit step. The contacts book their work at the velocity the bodies move with over
+the step (``contact.contact_work``), so the residual is the step's own error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from taichi_ice import budget, load_scenario
+from taichi_ice.friction import Coulomb, MemoryOnly, RateState, SteadyState
+from taichi_ice.world import World
+
+LAWS = {
+    "coulomb 0.1": Coulomb(0.1),
+    "coulomb 0.5": Coulomb(0.5),
+    "coulomb 0.9": Coulomb(0.9),
+    "rate-state": RateState(),
+    "steady-state": SteadyState(),
+    "memory-only": MemoryOnly(),
+}
+# The residual is at most 1 % of the energy lost (a free field: no work in) or of the work in
+# (the pillar): measured 0.49 % at most in the free field, 0.17 % in the pillar's 20 s, 0.01 %
+# with an ice strength (before the contacts booked their work at the mid-step velocity and
+# handed what they held to `severed` when they ended: 1.6 % for rate-and-state in the free
+# field, whatever the step).
+RESIDUAL_RTOL = 0.01
+# First order: halving the step halves the residual (measured 0.52-0.55 in the free field);
+# judged where the residual stands clear of round-off (above 1e-3 of the energy lost).
+HALVING = 0.6
+JUDGED_ABOVE = 1e-3
+# No energy created from nothing: between 10 ms samples the residual never falls by more than
+# this fraction of what came in (measured 4.6e-5 at the default step: a contact ending with
+# less than the work it took, a spring that stiffened while stretched).
+CREATED_RTOL = 2e-4
+
+
+@pytest.fixture(scope="module")
+def f64(taichi_runtime):
+    if taichi_runtime[1] != "f64":
+        pytest.skip("budget residuals of a few 1e-4 are float64 properties")
+
+
+def run(scenes, ratio: float, until: float, sample: float = 0.01):
+    """Every world's residual over time, what came in, what it lost, the work in and the
+    crushing work, at dt = ratio stable_dt."""
+    world = World(scenes, dt=ratio * scenes[0].stable_dt, force_dt=True)
+    start = budget.as_series(world.energies().copy())
+    every = round(sample / world.dt)
+    residuals = []
+    for _ in range(round(until / (every * world.dt))):
+        world.advance(every)
+        residuals.append(budget.residual(budget.as_series(world.energies()), start))
+    world.check()
+    now = budget.as_series(world.energies())
+    came = budget.came_in(now, start)
+    lost = came - now["kinetic_energy"] - now["elastic_energy"]
+    return np.asarray(residuals), came, lost, now["work_in"], now["crushing_energy"]
+
+
+def test_free_field_budget_closes_for_every_law_and_shrinks_with_dt(f64):
+    """Floes colliding in open water with no work in, under every law: the residual is under
+    1 % of the energy lost, halves with dt, and no energy is ever created."""
+    base = load_scenario("free_field")
+    scenes = [base.with_friction(law) for law in LAWS.values()]
+    res, came, lost, _, _ = run(scenes, 0.2, 2.5)
+    finer, _, lost_finer, _, _ = run(scenes, 0.1, 2.5)
+    for k, name in enumerate(LAWS):
+        final, final_finer = res[-1, k], finer[-1, k]
+        print(f"{name}: residual {final / lost[k]:+.2e} -> {final_finer / lost_finer[k]:+.2e}")
+        assert lost[k] > 0.25 * came[k], name  # the floes did collide
+        assert abs(final) < RESIDUAL_RTOL * lost[k], name
+        if abs(final) > JUDGED_ABOVE * lost[k]:
+            assert abs(final_finer) < HALVING * abs(final), name
+        created = -np.min(np.diff(res[:, k], prepend=0.0))
+        assert created < CREATED_RTOL * came[k], name
+
+
+def test_pillar_budget_closes_for_every_law(f64):
+    """The paper's scene, its 20 s (the jams form after ~10 s: ~1 MJ of work in), under every
+    law: residual under 1 % of the work the pusher did."""
+    base = load_scenario("pillar")
+    scenes = [base.with_friction(law) for law in LAWS.values()]
+    res, _, _, work, _ = run(scenes, 0.2, 20.0)
+    for k, name in enumerate(LAWS):
+        print(f"{name}: work in {work[k]:.4g} J, residual {res[-1, k]:+.3g} J")
+        assert work[k] > 0.0, name
+        assert np.max(np.abs(res[:, k])) < RESIDUAL_RTOL * work[k], name
+
+
+@pytest.mark.parametrize("strength", [1e6, 3e6], ids=["1MPa", "3MPa"])
+def test_crushing_budget_closes(f64, strength):
+    """With an ice strength the crushed overlap's work is booked when it crushes and what a
+    crushed contact holds when its floes slide apart when it ends: the residual stays under
+    1 % of the work in (it jumped by 1.4 kJ at any dt when the crushed overlap did not)."""
+    base = load_scenario("pillar")
+    ice = dataclasses.replace(base.ice, crushing_strength=strength)
+    laws = {"coulomb 0.9": LAWS["coulomb 0.9"], "rate-state": LAWS["rate-state"]}
+    scenes = [dataclasses.replace(base.with_friction(law), ice=ice) for law in laws.values()]
+    res, _, _, work, crushed = run(scenes, 0.2, 20.0)
+    for k, name in enumerate(laws):
+        print(f"{strength:g} Pa, {name}: work in {work[k]:.4g} J, residual {res[-1, k]:+.3g} J")
+        assert crushed[k] > 0.1 * work[k], name  # the strength did cap forces
+        assert work[k] > 0.0, name
+        assert np.max(np.abs(res[:, k])) < RESIDUAL_RTOL * work[k], name

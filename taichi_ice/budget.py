@@ -4,17 +4,18 @@
     residual = came_in - (kinetic + elastic + friction + viscous + drag + crushing + severed)
 
 ``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
-of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water,
-``crushing`` the overlap beyond the ice's strength (0 unless ``[ice] crushing_strength``),
-``severed`` the work the tangential stick springs still held when their contacts ended
-(their stiffness follows the contact width, so the work done on a spring need not come
-back; it can be negative; ``codes.BodyEnergy.SEVERED``); ``kinetic`` and ``elastic`` are
-what the world holds now (the overlaps and the tangential springs). The residual is the
-time discretisation error of the explicit step: it shrinks with dt, at first order (without
-the severed term it did not: docs/accuracy.md). Between
-collisions it is small; inside one it is not, at any dt below the limit (the contacts' work
-is booked at the start-of-step velocity: ``BREACH``), so a divergence is judged without the
-elastic term (``created``, ``breached``), and the whole residual at the end of a run.
+of contacts (the paper's Figure 6), ``viscous`` the contact dashpots (and the stick spring's
+backward-Euler step, a dashpot of ``k_t dt / 2``: ``contact.contact_work``), ``drag`` the
+water, ``crushing`` the overlap beyond the ice's strength (0 unless
+``[ice] crushing_strength``), ``severed`` the elastic energy contacts still held when they
+ended (the normal force follows the overlap's area and the stick spring's stiffness the
+contact width, neither a potential, so floes that slide apart take work along that no force
+gives back; it can be negative; ``codes.BodyEnergy.SEVERED``); ``kinetic`` and ``elastic``
+are what the world holds now (the overlaps and the tangential springs). The contacts book
+their work at the velocity the bodies move with over the step, so the residual is the time
+discretisation error of the explicit step alone: it shrinks with dt, faster than first
+order (docs/accuracy.md). A divergence is judged without the elastic term (``created``,
+``breached``), and the whole residual at the end of a run.
 
 The terms are ``codes.EnergyTerm`` columns in the kernels' energy table and named series
 (``SERIES``) in run files and results. Plain NumPy: the engine, the plots, the ensemble
@@ -47,13 +48,10 @@ DISSIPATED = (
 # The run is stopped as diverged once a world's kinetic energy and what it has dissipated
 # exceed what came in by this fraction of it (``breached``): an explicit step past its
 # stability limit creates energy from nothing, and it shows in the bodies' velocities or, in a
-# jam that rattles, in what the contacts dissipate. The elastic term is left out: the contact
-# stage books the work of a contact's forces with the velocity at the start of each step
-# while the bodies move with its mid-step velocity, and inside a collision that overstates
-# the energy a contact holds by about (pi / 2) w dt of it (w its frequency): 40-55 % of
-# what came in at about half the stability limit, 90-120 % at the limit, face on. That
-# error leaves with the contact; the part the dissipation keeps stays at or under 20 % up
-# to the limit (docs/accuracy.md, "The divergence guard").
+# jam that rattles, in what the contacts dissipate. The elastic term is left out: past the
+# limit the contacts' booking of their work (at a mid-step velocity estimated from each
+# body's last step) is no better than the step, and what a contact books as held leaves
+# with it (docs/accuracy.md, "The divergence guard").
 BREACH = 0.5
 # Energy (J) below which a budget is not judged: round-off of an idle world.
 BREACH_FLOOR = 1e-6

@@ -28,8 +28,9 @@ EXAMPLES = {
     "validate": """examples:
   taichi-ice validate --out out/validation          # Figure 3, exact solutions, stability
   taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)
-  taichi-ice validate --out out/validation --dem    # + the DEM's accuracy against cost and
-                                                    #   its stability limits (~11 minutes)""",
+  taichi-ice validate --out out/validation --dem    # + the DEM's accuracy against cost, its
+                                                    #   stability limits and the contacts'
+                                                    #   convergence in dt (~35 minutes)""",
     "paper": """examples:
   taichi-ice paper --out out/paper                  # Figures 3-6, budget, spread over 16 layouts,
                                                     # variants of the law, ice strength
@@ -366,8 +367,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--dem",
         action="store_true",
-        help="also chart the DEM's error against cost (collisions, pushed box, pillar scene) "
-        "and find the largest stable dt of each scene",
+        help="also chart the DEM's error against cost (collisions, pushed box, pillar scene), "
+        "find the largest stable dt of each scene, and check that friction at a contact "
+        "converges in dt (slider, hold and slide, steady sliding, every law in the pillar scene)",
     )
     p.add_argument("--quick", action="store_true", help="small sizes (for tests)")
 

@@ -9,10 +9,11 @@ For every candidate pair the owner body's thread clips the two outlines
   thickness x L: the overlap beyond the cap is crushed (``crush``), not recovered, and its
   work is booked as crushing;
 - tangential force from a stick spring ``k_t = ratio k_e L`` (proportional to the contact
-  width, like the normal one) and a dashpot ``c_t`` that damps it critically at the pair's
-  mass along the tangent (``tangential_damping``) on the tangential stretch ``xi``, capped at
-  ``mu F_n`` (Cundall and Strack 1979): beyond the cap the contact slips, the spring-dashpot
-  relaxes toward the cap and the slip distance times the cap is frictional work;
+  width, like the normal one) and a dashpot ``c_t`` that damps it to a fraction of critical
+  at the pair's mass along the tangent (``tangential_damping``) on the tangential stretch
+  ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979): beyond the cap the contact slips,
+  the spring-dashpot relaxes toward the cap and the slip distance times the cap is
+  frictional work;
 - ``mu`` from the world's law: Coulomb, or rate-and-state (and its variants) through
   ``slip.contact_friction_ti``: the slip rate solved in the step (the sliding rate, never
   faster than the surfaces), ``theta`` and the slip rate carried by the contact while it
@@ -141,12 +142,14 @@ def tangential_damping(k_t, zeta, inv_mass_i, inv_turn_i, inv_mass_j, inv_turn_j
 
     The spring holds the two bodies' contact points together along the tangent ``t``, where
     they move as one mass ``m_t``: ``1 / m_t = 1/m_i + (r_i x t)^2 / I_i + 1/m_j +
-    (r_j x t)^2 / I_j`` (0 for a fixed or kinematic body), so ``c_t = 2 zeta sqrt(k_t m_t)``.
-    Critically damped (``zeta = 1``, the default ``[ice] tangential_damping``), a load taken
-    up at once does not overshoot: a contact that stopped sliding holds any load below
-    ``mu0 F_n`` as a rigid one would. (A lighter dashpot rings: a block stopped by friction
-    under a constant pull of 0.8 mu0 F_n overshoots to above mu0 F_n and slides off at
-    zeta = 0.6; ``docs/friction.md``.)
+    (r_j x t)^2 / I_j`` (0 for a fixed or kinematic body), so ``c_t = 2 zeta sqrt(k_t m_t)``:
+    the same damping ratio whatever the floes' size. The default ``[ice] tangential_damping``
+    is 0.25: the contact checks of ``studies.contact_convergence`` give the same results from
+    0.25 to 1 (the slider's work to 1e-4), while explicit dashpots add up in a block with
+    several stuck contacts, so a jam at full load ran to 1.2 x the computed stable step at
+    0.25 and diverged below it at 0.5 (0.8-1.0 x) and 1 (0.6-0.8 x; ``docs/friction.md``).
+    (Proportional to ``k_v L`` as before, the ratio fell with the floes' mass: ~0.16 for the
+    paper's diamonds.)
 
     Args:
         k_t: stick spring (N/m). zeta: fraction of critical damping.
@@ -210,20 +213,22 @@ def contact_work_ti(
     f_el,
     f_t,
     approach,
-    slip,
     approach_change,
     slip_change,
     dt,
     slip_work,
     damp_work,
-    spring_work,
+    k_t,
+    xi,
+    xi_new,
     crush_work,
 ):
     """Taichi twin of :func:`contact_work`."""
     approach_mid = approach + 0.5 * approach_change
     extra = -f_t * 0.5 * slip_change * dt
-    held = f_el * approach_mid * dt - crush_work + spring_work
-    viscous = (f_n - f_el) * approach_mid * dt + damp_work
+    step = xi_new - xi
+    held = f_el * approach_mid * dt - crush_work + 0.5 * k_t * (xi_new * xi_new - xi * xi)
+    viscous = (f_n - f_el) * approach_mid * dt + damp_work + 0.5 * k_t * step * step
     friction = slip_work
     if slip_work > 0.0:
         friction += extra
@@ -237,13 +242,14 @@ def contact_work(
     f_el,
     f_t,
     approach,
-    slip,
     approach_change,
     slip_change,
     dt,
     slip_work,
     damp_work,
-    spring_work,
+    k_t,
+    xi,
+    xi_new,
     crush_work,
 ):
     """The work a contact's forces do on it over a step, split into what it holds and what
@@ -258,14 +264,21 @@ def contact_work(
     order where the motion is smooth. The tangential force's extra work over the step's
     extra slip goes to friction if the contact slides, to its spring if it sticks.
 
+    The stick spring's step is backward Euler (its force takes the stretch at the step's
+    end, ``tangential_force``), which dissipates ``k_t (xi' - xi)^2 / 2`` a step on top of
+    what the spring then holds: a dashpot of ``k_t dt / 2`` that vanishes with dt, booked as
+    viscous (left out, it was the residual's largest part: 1.9 % of what a free field lost
+    at the default step, halving with dt).
+
     Args:
         f_n: normal force (N). f_el: its elastic part ``k_e A`` (N). f_t: tangential force
             on the partner along the tangent (N).
-        approach, slip: the normal approach and tangential slip speeds at the step's start
-            (m/s). approach_change, slip_change: their change over the last step (m/s).
+        approach: the normal approach speed at the step's start (m/s). approach_change,
+            slip_change: the change of the approach and of the tangential slip speed over
+            the last step (m/s).
         dt: step (s). slip_work, damp_work: the step's frictional and tangential dashpot work
-            (``tangential_force``, J). spring_work: the stick spring's energy change (J).
-        crush_work: the work on the crushed overlap (J).
+            (``tangential_force``, J). k_t: stick spring (N/m). xi, xi_new: its stretch
+            before and after the step (m). crush_work: the work on the crushed overlap (J).
 
     Returns:
         ``(held, viscous, friction)``: the change of the energy the contact holds, and the
@@ -273,8 +286,9 @@ def contact_work(
     """
     approach_mid = approach + 0.5 * approach_change
     extra = -f_t * 0.5 * slip_change * dt
-    held = f_el * approach_mid * dt - crush_work + spring_work
-    viscous = (f_n - f_el) * approach_mid * dt + damp_work
+    step = xi_new - xi
+    held = f_el * approach_mid * dt - crush_work + 0.5 * k_t * (xi_new * xi_new - xi * xi)
+    viscous = (f_n - f_el) * approach_mid * dt + damp_work + 0.5 * k_t * step * step
     friction = slip_work
     if slip_work > 0.0:
         friction += extra
@@ -541,7 +555,7 @@ class ContactStage(Stage):
                     crush_work = cap_n * (crushed_new - crushed) / width
 
             # Tangential: a stick spring proportional to the contact width and a dashpot
-            # that damps it critically, ``tangential_damping_ti``.
+            # that damps it to a fraction of critical, ``tangential_damping_ti``.
             k_t = self.ratio * self.k_e * width
             c_t = tangential_damping_ti(
                 k_t,
@@ -599,13 +613,14 @@ class ContactStage(Stage):
                     f_el,
                     f_t,
                     approach,
-                    slip,
                     -rel_change.dot(normal),
                     rel_change.dot(tangent),
                     dt,
                     slip_work,
                     damp_work,
-                    0.5 * k_t * (xi_new * xi_new - xi * xi),
+                    k_t,
+                    xi,
+                    xi_new,
                     crush_work,
                 )
                 elastic += held

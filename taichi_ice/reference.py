@@ -153,7 +153,7 @@ def contact_force(
     law,
     inv_mass: tuple[float, float],
     inv_inertia: tuple[float, float],
-    zeta: float = 1.0,
+    zeta: float = 0.25,
     dvel: tuple = ((0.0, 0.0), (0.0, 0.0)),
     domega: tuple[float, float] = (0.0, 0.0),
     memory: ContactMemory | None = None,
@@ -262,13 +262,14 @@ def contact_force(
         f_el,
         f_t,
         approach,
-        slip,
         -float(change @ normal),
         float(change @ tangent),
         dt,
         slip_work,
         damp_work,
-        0.5 * k_t * (xi_new * xi_new - old.xi * old.xi),
+        k_t,
+        old.xi,
+        xi_new,
         crushing_work,
     )
     return ContactForce(
@@ -346,7 +347,7 @@ class ReferenceModel:
     k_e: float
     k_v: float
     ratio: float
-    zeta: float = 1.0
+    zeta: float = 0.25
     method: int = ThetaMethod.EXPONENTIAL
     quantum: float | None = FORCE_QUANTUM
     crushing_force: float | None = None

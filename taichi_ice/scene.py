@@ -96,8 +96,8 @@ class IceProperties:
         tangential_stiffness: ratio ``k_t / k_e`` of the tangential stick spring to the normal
             one, dimensionless; a contact of width L has ``k_t = ratio k_e L``.
         tangential_damping: the tangential dashpot as a fraction of critical damping of the
-            stick spring at the pair's mass along the tangent (1: critical, no overshoot;
-            ``contact.tangential_damping``), dimensionless.
+            stick spring at the pair's mass along the tangent (``contact.tangential_damping``),
+            dimensionless.
         crushing_strength: the ice's strength (Pa), or None (default: no limit). A contact's
             normal elastic force is capped at strength x thickness x contact width; overlap
             beyond the cap is crushed, not recovered, and its work is the budget's
@@ -109,7 +109,7 @@ class IceProperties:
     contact_stiffness: float = 9.75e7
     contact_viscosity: float = 3.16e4
     tangential_stiffness: float = 0.5
-    tangential_damping: float = 1.0
+    tangential_damping: float = 0.25
     crushing_strength: float | None = None
 
 

@@ -14,7 +14,8 @@ widest one a body's edge allows (``L`` = its longest edge) and the lightest effe
 is that of two such bodies hit at their farthest corner, where rotation makes them feel
 lighter: ``1 / m_eff = 2 (1 / m + R^2 / I)``, ``R`` the circumradius about the centroid. The
 limit is the smaller of the normal and the tangential oscillator's: at the defaults
-(``r = 0.5``, ``zeta = 1``) the tangential one, ``0.83 / w_t`` with ``w_t = sqrt(r) w``.
+(``r = 0.5``, ``zeta = 0.25``) the normal one (the tangential one is ``1.53 / w_t`` with
+``w_t = sqrt(r) w``; a critically damped spring's, ``0.83 / w_t``, would bind).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ def body_contact_limit(
     stiffness: float,
     viscosity: float,
     tangential_stiffness: float = 0.5,
-    tangential_damping: float = 1.0,
+    tangential_damping: float = 0.25,
 ) -> float:
     """Stability limit (s) of the stiffest contact between two copies of one dynamic body.
 
@@ -79,7 +80,7 @@ def stable_time_step(
     stiffness: float,
     viscosity: float,
     tangential_stiffness: float = 0.5,
-    tangential_damping: float = 1.0,
+    tangential_damping: float = 0.25,
 ) -> float:
     """Largest stable dt (s) over the outlines of a scene's dynamic bodies (the arguments
     of ``body_contact_limit``).

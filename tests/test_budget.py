@@ -27,19 +27,21 @@ LAWS = {
     "memory-only": MemoryOnly(),
 }
 # The residual is at most 1 % of the energy lost (a free field: no work in) or of the work in
-# (the pillar): measured 0.49 % at most in the free field, 0.17 % in the pillar's 20 s, 0.01 %
-# with an ice strength (before the contacts booked their work at the mid-step velocity and
-# handed what they held to `severed` when they ended: 1.6 % for rate-and-state in the free
-# field, whatever the step).
+# (the pillar): measured 0.12 % at most in the free field, 0.01 % in the pillar's 20 s, with
+# an ice strength too (before the contacts booked their work at the mid-step velocity, the
+# stick spring's step its dissipation and the contacts that ended what they held: 1.6 % for
+# rate-and-state in the free field, whatever the step).
 RESIDUAL_RTOL = 0.01
-# First order: halving the step halves the residual (measured 0.52-0.55 in the free field);
-# judged where the residual stands clear of round-off (above 1e-3 of the energy lost).
+# It shrinks with dt: halving the step divides the largest residual by 4 to 7 in the free
+# field (measured); at least by 1 / HALVING. Judged where the residual stands clear of
+# round-off (above 1e-5 of the energy lost).
 HALVING = 0.6
-JUDGED_ABOVE = 1e-3
+JUDGED_ABOVE = 1e-5
 # No energy created from nothing: between 10 ms samples the residual never falls by more than
-# this fraction of what came in (measured 4.6e-5 at the default step: a contact ending with
-# less than the work it took, a spring that stiffened while stretched).
-CREATED_RTOL = 2e-4
+# this fraction of what came in (measured 1.6e-4 at the default step, 4.8e-5 at half of it:
+# the mid-step velocity is estimated from each body's last step, which a collision's onset
+# changes).
+CREATED_RTOL = 5e-4
 
 
 @pytest.fixture(scope="module")
@@ -66,19 +68,20 @@ def run(scenes, ratio: float, until: float, sample: float = 0.01):
 
 
 def test_free_field_budget_closes_for_every_law_and_shrinks_with_dt(f64):
-    """Floes colliding in open water with no work in, under every law: the residual is under
-    1 % of the energy lost, halves with dt, and no energy is ever created."""
+    """Floes colliding in open water with no work in, under every law: the residual stays
+    under 1 % of the energy lost, shrinks with dt, and no energy is ever created beyond the
+    step's error."""
     base = load_scenario("free_field")
     scenes = [base.with_friction(law) for law in LAWS.values()]
     res, came, lost, _, _ = run(scenes, 0.2, 2.5)
     finer, _, lost_finer, _, _ = run(scenes, 0.1, 2.5)
     for k, name in enumerate(LAWS):
-        final, final_finer = res[-1, k], finer[-1, k]
-        print(f"{name}: residual {final / lost[k]:+.2e} -> {final_finer / lost_finer[k]:+.2e}")
+        worst, worst_finer = np.max(np.abs(res[:, k])), np.max(np.abs(finer[:, k]))
+        print(f"{name}: residual {worst / lost[k]:.2e} -> {worst_finer / lost_finer[k]:.2e}")
         assert lost[k] > 0.25 * came[k], name  # the floes did collide
-        assert abs(final) < RESIDUAL_RTOL * lost[k], name
-        if abs(final) > JUDGED_ABOVE * lost[k]:
-            assert abs(final_finer) < HALVING * abs(final), name
+        assert worst < RESIDUAL_RTOL * lost[k], name
+        if worst > JUDGED_ABOVE * lost[k]:
+            assert worst_finer < HALVING * worst, name
         created = -np.min(np.diff(res[:, k], prepend=0.0))
         assert created < CREATED_RTOL * came[k], name
 

@@ -152,7 +152,9 @@ def kernel_contacts(world: World) -> dict:
 
 @pytest.mark.parametrize("law", [Coulomb(0.4), RateState()], ids=["coulomb", "rate-state"])
 def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
-    """Force, torque, memory and dissipation of one contact match the NumPy twin, twice."""
+    """Force, torque, memory and dissipation of one contact match the NumPy twin, twice:
+    the damped stick spring, the slip rate and theta, and the work booked at the
+    mid-step velocity."""
     rng = np.random.default_rng(SEED)
     scenes, pos, ang = pair_scenes(rng, law)
     world = World(scenes)
@@ -161,6 +163,12 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
     vel = np.asarray(d.body_vel.to_numpy(), dtype=np.float64)
     omega = np.asarray(d.body_omega.to_numpy(), dtype=np.float64)
     state = ReferenceState(pos=pos, angle=ang, vel=vel, omega=omega)
+    # Each body's last velocity change, with which the contacts book their work at the
+    # mid-step velocity (``contact.contact_work``): random, as after a step.
+    dvel = rng.uniform(-0.05, 0.05, vel.shape)
+    domega = rng.uniform(-0.05, 0.05, omega.shape)
+    d.body_dvel.from_numpy(dvel)
+    d.body_domega.from_numpy(domega)
     memory: dict = {}
     seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0, "severed": 0}
     worst = 0.0  # largest force difference (N)
@@ -197,6 +205,8 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                 inv_mass=(model.inv_mass(i), model.inv_mass(j)),
                 inv_inertia=(model.inv_inertia(i), model.inv_inertia(j)),
                 zeta=model.zeta,
+                dvel=(dvel[i], dvel[j]),
+                domega=(float(domega[i]), float(domega[j])),
                 memory=memory.get((i, j)),
             )
             # A contact that ended books what it held (``SEVERED``).

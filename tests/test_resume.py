@@ -22,7 +22,8 @@ from taichi_ice.slip import NO_INTERFACE
 from taichi_ice.tomlio import dump_toml
 
 UNTIL = 0.3  # s
-STOP_AT_FLUSH = 4  # the run is killed at its 4th frame write, after 3 checkpoints
+STOP_AT_FLUSH = 5  # the run is killed at its 5th frame write, last checkpointed at t = 0.2 s,
+# when the blocks slide on the floor with a rate-and-state interface (at 0.15 s they are stuck)
 
 
 def jam():

@@ -16,6 +16,10 @@
   against an ODE, the pushed box's energy budget, the pillar scene against a run at a quarter
   of the step, when chaotic runs part), and the largest step each scene survives
   (``dem_stability``), with the recommended ``dt_safety``.
+- ``contact_convergence`` (``--dem``): friction at a DEM contact against dt: a driven
+  slider's frictional work and slip starts, a block that slid holding or sliding under a
+  pull, steady sliding on a moving floor against mu_ss, every law in the pillar scene before
+  runs part; and what the tangential stiffness and the steady-state law's t_c change.
 """
 
 from __future__ import annotations
@@ -33,7 +37,8 @@ def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bo
         out: output folder (created if missing).
         speed: also run the speed/accuracy study (a few minutes at 1e6 interfaces).
         quick: smaller sizes, for tests and smoke runs.
-        dem: also run the DEM accuracy and stability study (~11 minutes on 2 cores).
+        dem: also run the DEM accuracy and stability study and the contact convergence
+            study (~35 minutes on 2 cores).
 
     Returns:
         Process exit code: 0.
@@ -52,8 +57,9 @@ def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bo
 
         speed_accuracy.run(out_dir, quick=quick)
     if dem:
-        from . import dem_accuracy
+        from . import contact_convergence, dem_accuracy
 
         dem_accuracy.run(out_dir, quick=quick)
+        contact_convergence.run(out_dir, quick=quick)
     print(f"validate: done in {time.perf_counter() - start:.1f} s; results in {out_dir}/")
     return 0

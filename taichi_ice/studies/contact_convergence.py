@@ -124,6 +124,7 @@ def block_scene(
     dt: Optional[float] = None,
     tangential_stiffness: Optional[float] = None,
     duration: float = 1.0,
+    ice: Optional[dict] = None,
 ):
     """A block (probe) pressed onto a floor by ``press`` (N) with a force ``force_x``
     along the floor; the floor fixed, or kinematic at ``floor_speed`` (m/s); with ``stop``,
@@ -134,7 +135,7 @@ def block_scene(
     sim: dict[str, Any] = {"duration": duration, "output_interval": duration}
     if dt is not None:
         sim.update(dt=dt, force_dt=True, series_interval=min(dt * 100, duration))
-    ice: dict[str, Any] = {}
+    ice = dict(ice or {})
     if tangential_stiffness is not None:
         ice["tangential_stiffness"] = tangential_stiffness
     floor: dict[str, Any] = {

@@ -30,7 +30,7 @@ EXAMPLES = {
   taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)
   taichi-ice validate --out out/validation --dem    # + the DEM's accuracy against cost, its
                                                     #   stability limits and the contacts'
-                                                    #   convergence in dt (~35 minutes)""",
+                                                    #   convergence in dt (~20 minutes)""",
     "paper": """examples:
   taichi-ice paper --out out/paper                  # Figures 3-6, budget, spread over 16 layouts,
                                                     # variants of the law, ice strength

@@ -38,7 +38,7 @@ def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bo
         speed: also run the speed/accuracy study (a few minutes at 1e6 interfaces).
         quick: smaller sizes, for tests and smoke runs.
         dem: also run the DEM accuracy and stability study and the contact convergence
-            study (~35 minutes on 2 cores).
+            study (~20 minutes on 2 cores).
 
     Returns:
         Process exit code: 0.

@@ -4,7 +4,7 @@ Four checks of the rate-and-state contact (``slip``, ``contact``), each a scene 
 to run at many steps, and the sensitivity of the paper's scene to what the contact model
 leaves open:
 
-1. **The driven slider.** A block (2 m x 0.5 m, 276 kg) pressed onto a fixed floor by ``PRESS`` and
+1. **The driven slider.** A block (4 m x 0.25 m, 276 kg) pressed onto a fixed floor by ``PRESS`` and
    pulled through a spring ``DRIVER_STIFFNESS`` whose end moves back and forth at
    ``0.1 sin(2 pi t / 4)`` m/s for ``SLIDER_UNTIL`` (the spring force is written from Python
    before every step, from the block's position and the driver's). Every reversal stops the

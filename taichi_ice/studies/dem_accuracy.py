@@ -26,7 +26,7 @@ world alone at the default ratio (per scene, law and precision), over ``TIMING_S
 seconds after its run, so that no kernel compilation is timed (the work of a step does not
 depend on dt). The other ratios run each scene's laws batched (a world's trajectory does
 not depend on its batch); every new dt costs a kernel compilation (~10 s on 2 cores), which
-is most of the study's ~11 minutes.
+is much of the study's ~8 minutes.
 
 Taichi holds one precision per process: each precision runs in its own worker process
 (``python -m taichi_ice.studies.dem_accuracy --worker f32 ...``; ``--quick`` runs in this

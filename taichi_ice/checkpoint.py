@@ -15,7 +15,8 @@ declaration (``taichi_ice.schema``) as fields come and go:
 - ``/host/initial_energy``: the energy table at t = 0 (the budget's starting capital);
 - attributes: ``steps``, ``time``, ``dt``, ``precision``, ``n_samples`` and ``n_frames``
   (rows of each run file written when it was taken, JSON lists), ``scenarios`` and
-  ``frictions`` (JSON lists: a resume must be the same run), ``format_version`` and
+  ``frictions`` (JSON lists: a resume must be the same run), ``run_ids`` (the ``run_id`` of
+  each run file, JSON list: a resume must continue the same files), ``format_version`` and
   ``written`` (UTC).
 """
 
@@ -60,8 +61,9 @@ def identity(sim) -> dict:
     }
 
 
-def write(sim, path: str | Path, n_samples, n_frames) -> Path:
-    """Write ``sim``'s whole state to ``path`` atomically (write, fsync, rename)."""
+def write(sim, path: str | Path, n_samples, n_frames, run_ids=None) -> Path:
+    """Write ``sim``'s whole state to ``path`` atomically (write, fsync, rename);
+    ``run_ids``: the run files' ``run_id`` attributes, checked on resume."""
     path = Path(path)
     world = sim.world
     tmp = path.with_name(path.name + ".tmp")
@@ -82,6 +84,8 @@ def write(sim, path: str | Path, n_samples, n_frames) -> Path:
         f.attrs["frictions"] = json.dumps(ident["frictions"])
         f.attrs["n_samples"] = json.dumps([int(n) for n in n_samples])
         f.attrs["n_frames"] = json.dumps([int(n) for n in n_frames])
+        if run_ids is not None:
+            f.attrs["run_ids"] = json.dumps([str(r) for r in run_ids])
     with open(tmp, "rb") as fh:
         os.fsync(fh.fileno())
     os.replace(tmp, path)
@@ -111,8 +115,16 @@ def read(path: str | Path) -> dict:
                 out[group] = {name: ds[()] for name, ds in f[group].items()}
     except (OSError, KeyError) as exc:
         raise RunFileError(f"{path}: not a taichi-ice checkpoint ({exc})") from None
-    for key in ("scenarios", "frictions", "n_samples", "n_frames"):
-        out["attrs"][key] = json.loads(out["attrs"][key])
+    for key in ("scenarios", "frictions", "n_samples", "n_frames", "run_ids"):
+        if key == "run_ids" and key not in out["attrs"]:
+            continue  # written before run ids: the rows are still checked
+        try:
+            out["attrs"][key] = json.loads(out["attrs"][key])
+        except (KeyError, TypeError, ValueError):
+            raise RunFileError(
+                f"{path}: a damaged checkpoint (attribute {key} missing or unreadable); "
+                "start anew with --overwrite"
+            ) from None
     return out
 
 

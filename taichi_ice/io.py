@@ -47,6 +47,7 @@ import json
 import os
 import socket
 import time as _time
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -348,6 +349,12 @@ class RunWriter:
         attrs: extra root attributes (arch, precision, dt ...).
         resume: continue the file at ``path`` instead: its series and frames are cut to
             ``resume`` = ``(samples, frames)`` rows and it is marked running again.
+        run_id: with ``resume``, the ``run_id`` the checkpoint recorded for this file (None:
+            a checkpoint written before run ids, not checked). A file of another run, or one
+            with fewer rows than the checkpoint counts, is refused before anything changes.
+
+    Every new file gets a ``run_id`` attribute (random, 32 hex digits) that its checkpoints
+    record, so that a resume never continues one run from another's checkpoint.
     """
 
     def __init__(
@@ -356,6 +363,7 @@ class RunWriter:
         scene,
         attrs: Mapping[str, object],
         resume: tuple[int, int] | None = None,
+        run_id: str | None = None,
     ):
         self.path = Path(path)
         self.series: dict[str, list] = {k: [] for k in ("time", "probe_force", "n_contacts")}
@@ -368,6 +376,8 @@ class RunWriter:
             self.n_samples, self.n_frames = resume
             with _open_for_write(self.path) as f:
                 _check_run_file(f, self.path)
+                _check_resumable(f, self.path, run_id, self.n_samples, self.n_frames)
+                self.run_id = str(f.attrs.get("run_id", ""))
                 for ds in f["series"].values():
                     ds.resize(self.n_samples, axis=0)
                 for ds in f["frames"].values():
@@ -383,8 +393,10 @@ class RunWriter:
         with contextlib.suppress(FileNotFoundError):
             # Unlink, not truncate: a reader that holds the old file keeps it whole.
             self.path.unlink()
+        self.run_id = uuid.uuid4().hex
         with h5py.File(self.path, "w", track_order=True) as f:
             self._create(f, scene, attrs)
+            f.attrs["run_id"] = self.run_id
 
     def _create(self, f: h5py.File, scene, attrs: Mapping[str, object]) -> None:
         n, p = scene.n_bodies, len(scene.probe_indices)
@@ -545,6 +557,32 @@ def _growing(group, name: str, shape: tuple, dtype=np.float64):
 # --------------------------------------------------------------------------------------------
 # Reading
 # --------------------------------------------------------------------------------------------
+
+
+def check_resumable(path, run_id: str | None, samples: int, frames: int) -> None:
+    """Raise RunFileError unless the run file at ``path`` is the one a checkpoint recorded
+    (``run_id``, None: not checked) and holds the ``samples`` and ``frames`` it counts; the
+    file is only read (a batch checks every file before changing any)."""
+    with open_file(path) as f:
+        _check_resumable(f, path, run_id, samples, frames)
+
+
+def _check_resumable(f: h5py.File, path, run_id: str | None, samples: int, frames: int) -> None:
+    """Refuse to resume ``f`` from a checkpoint of another run, or from one that counts more
+    rows than the file holds (the file was replaced after the checkpoint was taken)."""
+    fix = "start anew with --overwrite (resume=False), which removes the checkpoint"
+    if run_id is not None and str(f.attrs.get("run_id", "")) != run_id:
+        raise RunFileError(
+            f"{path}: its checkpoint belongs to another run (run ids differ: the file was "
+            f"replaced or the checkpoint copied from elsewhere); {fix}"
+        )
+    held = (len(f["series"]["time"]), len(f["frames"]["time"]))
+    if held[0] < samples or held[1] < frames:
+        raise RunFileError(
+            f"{path}: holds {held[0]} samples and {held[1]} frames, fewer than the "
+            f"{samples} and {frames} its checkpoint counts: the checkpoint is not of this "
+            f"file; {fix}"
+        )
 
 
 def _check_run_file(f: h5py.File, path) -> None:

@@ -25,7 +25,14 @@ import numpy as np
 from . import backend, budget, checkpoint
 from . import io as runio
 from .energy import CONTACTS_COLUMN, STATUS_COLUMN
-from .errors import DivergenceError, Interrupted, StabilityError, TaichiIceError, UsageError
+from .errors import (
+    DivergenceError,
+    Interrupted,
+    RunFileError,
+    StabilityError,
+    TaichiIceError,
+    UsageError,
+)
 from .io import RunWriter
 
 # The most samples one stepping launch takes (Simulation.run): 0.64 s of the paper's scene
@@ -37,6 +44,9 @@ SAMPLES_PER_LAUNCH = 64
 # take FLUSH_BYTES.
 FLUSH_EVERY = 5.0
 FLUSH_BYTES = 64 << 20
+# The most steps between two frames: a stepping plan counts steps per sample in 32-bit
+# integers (``World.advance_sampled``), and a dt this small is a mistake, not a run.
+MAX_STEPS_PER_FRAME = 2**31 - 1
 
 # A run whose energy budget misses by more than this fraction of the energy that came in is
 # marked with a warning (file attribute ``warning``, ``RunResult.warning``, the summary line).
@@ -162,6 +172,13 @@ class Simulation:
         else:
             self.frame_every = max(1, math.ceil(first.output_interval / requested * (1 - 1e-12)))
             self.series_every = 0
+        if self.frame_every > MAX_STEPS_PER_FRAME:
+            raise UsageError(
+                f"dt = {requested:g} s makes {self.frame_every:.3g} steps per frame "
+                f"(output_interval {first.output_interval:g} s); the engine takes at most "
+                f"{MAX_STEPS_PER_FRAME} (2^31 - 1): use a larger dt or a shorter "
+                "[simulation] output_interval"
+            )
         self.dt = first.output_interval / self.frame_every
         self.series_every = self.series_every or max(1, round(first.series_interval / self.dt))
         # Said, never silent: the step was shortened so that samples fall on whole steps.
@@ -334,8 +351,17 @@ class Simulation:
             ckpt = checkpoint.read(ckpt_path)
             checkpoint.restore(self, ckpt, ckpt_path)
             rows = list(zip(ckpt["attrs"]["n_samples"], ckpt["attrs"]["n_frames"]))
+            ids = ckpt["attrs"].get("run_ids") or [None] * len(paths)
+            if len(rows) != len(paths) or len(ids) != len(paths):
+                raise RunFileError(
+                    f"{ckpt_path}: a checkpoint of {len(rows)} run file(s), not of these "
+                    f"{len(paths)}; start anew with --overwrite"
+                )
+            for p, (samples, frames), i in zip(paths, rows, ids):
+                runio.check_resumable(p, i, samples, frames)  # all before any changes
             writers = [
-                RunWriter(p, s, attrs, resume=r) for p, s, r in zip(paths, self.scenes, rows)
+                RunWriter(p, s, attrs, resume=r, run_id=i)
+                for p, s, r, i in zip(paths, self.scenes, rows, ids)
             ]
             for s, writer in zip(series, writers):
                 old = runio.read_run(writer.path)["series"]
@@ -346,6 +372,8 @@ class Simulation:
                     f"until = {until:g} s is before the checkpoint's time {self.time:g} s"
                 )
         else:
+            if ckpt_path is not None:
+                checkpoint.remove(ckpt_path)  # an earlier run's, stale for this one
             writers = [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes)]
         bar = Progress(n_end, self.dt, enabled=progress)
         start = _time.perf_counter()
@@ -421,11 +449,20 @@ class Simulation:
                         w.flush(self.world.steps)
                     self._checkpoint(ckpt_path, writers)
             warning = "; ".join(w for w in (self.forced_note, self._budget_warning()) if w)
-        except (TaichiIceError, KeyboardInterrupt) as exc:
+        except BaseException as exc:
+            # Any exception ends the run as failed, ours with their message, any other
+            # (a bug, an OSError of the disk) with its type too: a file never says
+            # complete for a run that did not complete.
             status = "failed"
-            failure = str(exc) or type(exc).__name__
+            if isinstance(exc, (TaichiIceError, KeyboardInterrupt)):
+                failure = str(exc) or type(exc).__name__
+            else:
+                failure = f"{type(exc).__name__}: {exc}"
             # What was sampled before the failure travels with the error (``exc.result``).
-            exc.result = self._result(series, paths, status, failure, start, seen)
+            try:
+                exc.result = self._result(series, paths, status, failure, start, seen)
+            except AttributeError:  # an exception type that takes no attributes
+                pass
             raise
         finally:
             wall = _time.perf_counter() - start
@@ -438,7 +475,13 @@ class Simulation:
         return result
 
     def _checkpoint(self, path: Path, writers) -> None:
-        checkpoint.write(self, path, [w.n_samples for w in writers], [w.n_frames for w in writers])
+        checkpoint.write(
+            self,
+            path,
+            [w.n_samples for w in writers],
+            [w.n_frames for w in writers],
+            [w.run_id for w in writers],
+        )
 
     def _budget_warning(self) -> str:
         """A warning when a world's energy budget misses by more than RESIDUAL_WARNING."""

@@ -1,0 +1,137 @@
+"""Nothing lost, nothing silent (issue 27): a run that crashes says so in its file, a dt too
+small to count is refused, and a resume never continues one run from another's checkpoint.
+
+Each test reproduces a fault found by trying the landed code as a hostile user would: an
+OverflowError from ``--dt 1e-300`` left a file marked ``complete`` with 0 steps; a stale
+checkpoint left by a finished run was restored into the run that overwrote it, padding its
+file with rows of zeros marked ``complete``; a checkpoint of another run was accepted.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from taichi_ice import Simulation, load_scenario
+from taichi_ice import checkpoint as ckpt
+from taichi_ice.cli import main
+from taichi_ice.errors import RunFileError
+from taichi_ice.io import read_run
+from taichi_ice.world import World
+
+ROOT = Path(__file__).resolve().parents[1]
+TWO_SQUARES = str(ROOT / "scenarios" / "two_squares.toml")
+
+
+def one_line(err: str) -> str:
+    """The one error line of a command's stderr (after its header line, if it printed one),
+    and no traceback."""
+    assert "Traceback" not in err, err
+    lines = [x for x in err.strip().splitlines() if x.startswith("taichi-ice:")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scenario(TWO_SQUARES)
+
+
+def run(scene, path, until, **kw):
+    return Simulation(scene).run(until=until, out=path, **kw)
+
+
+def test_a_run_that_crashes_on_an_error_not_ours_is_marked_failed(scene, tmp_path, monkeypatch):
+    """Any exception, not only the package's own, ends the file as ``failed`` with the
+    exception's type and message, and keeps the rows written before it readable."""
+    advance = World.advance_sampled
+    calls = {"n": 0}
+
+    def fail_on_the_third(self, plan):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OSError(28, "No space left on device")
+        return advance(self, plan)
+
+    monkeypatch.setattr(World, "advance_sampled", fail_on_the_third)
+    path = tmp_path / "crash.h5"
+    with pytest.raises(OSError):
+        run(scene, path, 0.05, flush_every=0)
+    monkeypatch.setattr(World, "advance_sampled", advance)
+    got = read_run(path)
+    assert got["attrs"]["status"] == "failed"
+    assert got["attrs"]["failure"].startswith("OSError: ")
+    assert "No space left" in got["attrs"]["failure"]
+    assert len(got["frames"]["time"]) >= 1  # what was flushed before is there
+
+
+def test_a_dt_too_small_to_count_is_one_line_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "tiny.h5"
+    argv = ["run", TWO_SQUARES, "--dt", "1e-300", "--until", "0.01", "--out", str(out)]
+    assert main([*argv, "--quiet"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "steps per frame" in line and "larger dt" in line
+    assert not out.exists()
+
+
+def test_overwrite_removes_the_stale_checkpoint_so_resume_has_nothing_to_restore(tmp_path, capsys):
+    """The reproduction: a finished run with checkpoints, then the same path overwritten
+    without them, then ``--resume``: the old checkpoint used to be restored into the new
+    file (rows of zeros, ``complete``). Now the overwrite removes it, and the resume says
+    there is none."""
+    out = tmp_path / "p.h5"
+    base = ["run", TWO_SQUARES, "--out", str(out), "--quiet"]
+    assert main([*base, "--until", "0.05", "--checkpoint-every", "0"]) == 0
+    assert ckpt.path_for(out).exists()
+    assert main([*base, "--until", "0.02", "--overwrite"]) == 0
+    assert not ckpt.path_for(out).exists()
+    before = read_run(out)
+    capsys.readouterr()
+    assert main([*base, "--until", "0.05", "--resume"]) == 2
+    assert "no checkpoint" in one_line(capsys.readouterr().err)
+    after = read_run(out)
+    assert after["attrs"]["status"] == before["attrs"]["status"] == "complete"
+    np.testing.assert_array_equal(after["series"]["time"], before["series"]["time"])
+
+
+def test_resume_refuses_a_checkpoint_of_another_run_and_leaves_the_file_as_it_was(scene, tmp_path):
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    run(scene, a, 0.04, checkpoint_every=0)
+    run(scene, b, 0.04, checkpoint_every=0)
+    shutil.copyfile(ckpt.path_for(b), ckpt.path_for(a))  # same scene, another run
+    before = read_run(a)
+    with pytest.raises(RunFileError, match="belongs to another run"):
+        run(scene, a, 0.08, resume=True)
+    after = read_run(a)
+    assert after["attrs"]["status"] == "complete"
+    assert after["attrs"].get("resumed", 0) == before["attrs"].get("resumed", 0)
+    np.testing.assert_array_equal(after["series"]["time"], before["series"]["time"])
+
+
+def test_resume_refuses_a_checkpoint_that_counts_more_rows_than_the_file_holds(scene, tmp_path):
+    """A checkpoint written before run ids (no ``run_ids`` attribute) is still checked
+    against the rows its file holds: the file was replaced by a shorter run."""
+    path = tmp_path / "r.h5"
+    run(scene, path, 0.08, checkpoint_every=0)
+    saved = tmp_path / "saved.ckpt"
+    shutil.copyfile(ckpt.path_for(path), saved)
+    run(scene, path, 0.02)  # a new, shorter run in its place
+    shutil.copyfile(saved, ckpt.path_for(path))
+    with h5py.File(ckpt.path_for(path), "a") as f:
+        del f.attrs["run_ids"]
+    with pytest.raises(RunFileError, match="fewer than"):
+        run(scene, path, 0.1, resume=True)
+    assert read_run(path)["attrs"]["status"] == "complete"
+
+
+def test_a_checkpoint_with_a_damaged_attribute_is_one_clear_error(scene, tmp_path):
+    path = tmp_path / "d.h5"
+    run(scene, path, 0.04, checkpoint_every=0)
+    with h5py.File(ckpt.path_for(path), "a") as f:
+        f.attrs["n_samples"] = "[1, 2"
+    with pytest.raises(RunFileError, match="damaged checkpoint"):
+        ckpt.read(ckpt.path_for(path))

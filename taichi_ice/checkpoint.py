@@ -31,7 +31,7 @@ import h5py
 import numpy as np
 
 from . import provenance
-from .errors import RunFileError
+from .errors import OutputError, RunFileError
 
 FORMAT_VERSION = "6"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
@@ -64,14 +64,39 @@ def identity(sim) -> dict:
 def write(sim, path: str | Path, n_samples, n_frames, run_ids=None) -> Path:
     """Write ``sim``'s whole state to ``path`` atomically (write, fsync, rename);
     ``run_ids``: the run files' ``run_id`` attributes, checked on resume."""
+    from .io import check_room
+
     path = Path(path)
     world = sim.world
     tmp = path.with_name(path.name + ".tmp")
+    arrays = {
+        group: {name: field.to_numpy() for name, field in _fields(container).items()}
+        for group, container in (("data", world.data), ("nbr", world.neighbours))
+    }
+    size = sum(a.nbytes for g in arrays.values() for a in g.values())
+    # The last checkpoint stays until the new one is whole; a disk without room for both
+    # stops the run here, before the new one is begun.
+    check_room(path, 2 * size, "the checkpoint")
+    try:
+        _write(sim, tmp, arrays, run_ids, n_samples, n_frames)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+    except OSError as exc:
+        remove(tmp)
+        raise OutputError(
+            f"{path}: the checkpoint could not be written ({exc}); the last one is kept"
+        ) from None
+    os.replace(tmp, path)
+    return path
+
+
+def _write(sim, tmp: Path, arrays: dict, run_ids, n_samples, n_frames) -> None:
+    world = sim.world
     with h5py.File(tmp, "w") as f:
-        for group, container in (("data", world.data), ("nbr", world.neighbours)):
+        for group, named in arrays.items():
             g = f.create_group(group)
-            for name, field in _fields(container).items():
-                g.create_dataset(name, data=field.to_numpy())
+            for name, array in named.items():
+                g.create_dataset(name, data=array)
         f.create_group("host").create_dataset("initial_energy", data=sim.initial_energy)
         ident = identity(sim)
         f.attrs["format_version"] = FORMAT_VERSION
@@ -86,10 +111,6 @@ def write(sim, path: str | Path, n_samples, n_frames, run_ids=None) -> Path:
         f.attrs["n_frames"] = json.dumps([int(n) for n in n_frames])
         if run_ids is not None:
             f.attrs["run_ids"] = json.dumps([str(r) for r in run_ids])
-    with open(tmp, "rb") as fh:
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    return path
 
 
 def read(path: str | Path) -> dict:

@@ -45,6 +45,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import socket
 import time as _time
 import uuid
@@ -334,6 +335,39 @@ def release(path: str | Path) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+# Bytes a run file's disk must keep free beyond what a write needs: HDF5 allocates chunks
+# and metadata as it writes, and a write that meets a full disk leaves the whole file
+# unreadable (h5py: "addr overflow"), not just its last rows. So a write that would not fit
+# with this much to spare is not started: the run stops with the file whole.
+DISK_RESERVE = 1 << 20
+
+
+class DiskFullError(OutputError):
+    """The disk of an output file has no room for the next write; nothing was written, and
+    every file is as whole as after its last write."""
+
+
+def check_room(path: Path, needed: int, what: str = "the next write", started: bool = True):
+    """Raise DiskFullError unless the disk of ``path`` has ``needed`` bytes free and
+    ``DISK_RESERVE`` to spare; ``started``: the run has written to it already."""
+    try:
+        free = shutil.disk_usage(Path(path).parent).free
+    except OSError:  # no answer from the file system: let the write itself try
+        return
+    if free < needed + DISK_RESERVE:
+        raise DiskFullError(
+            f"{path}: the disk is full ({free / 1e6:.3g} MB free; {what} needs about "
+            f"{(needed + DISK_RESERVE) / 1e6:.3g} MB with a margin): "
+            + (
+                "the run stopped with every row written so far intact; free some space or "
+                "write elsewhere, and continue with --resume if it wrote checkpoints "
+                "(--checkpoint-every)"
+                if started
+                else "nothing was written; free some space or write elsewhere"
+            )
+        )
+
+
 def _open_for_write(path: Path) -> h5py.File:
     # File locking off: the lock file keeps writers apart, and a reader that holds the file
     # open (xarray keeps it) must not stop the run.
@@ -394,6 +428,7 @@ class RunWriter:
             # Unlink, not truncate: a reader that holds the old file keeps it whole.
             self.path.unlink()
         self.run_id = uuid.uuid4().hex
+        check_room(self.path, 0, "a new run file", started=False)
         with h5py.File(self.path, "w", track_order=True) as f:
             self._create(f, scene, attrs)
             f.attrs["run_id"] = self.run_id
@@ -493,8 +528,19 @@ class RunWriter:
         """Bytes of the frames kept in memory, not yet written (samples are a few % of it)."""
         return self._buffered
 
+    def _needed(self) -> int:
+        """Bytes the next write may take: the rows kept, twice (chunks, copies)."""
+        series = sum(np.asarray(v[0]).nbytes * len(v) for v in self.series.values() if v)
+        return 2 * (self._buffered + series)
+
     def flush(self, steps: int, **attrs) -> None:
-        """Write the rows kept so far, and ``steps`` and ``attrs``, in one open of the file."""
+        """Write the rows kept so far, and ``steps`` and ``attrs``, in one open of the file.
+
+        Raises:
+            DiskFullError: the disk has no room for them (``check_room``); nothing is
+                written, and the rows stay kept.
+        """
+        check_room(self.path, self._needed())
         with _open_for_write(self.path) as f:
             self._write(f, steps, attrs)
 
@@ -519,7 +565,20 @@ class RunWriter:
             f.attrs[key] = value
 
     def close(self, status: str, failure: str = "", **attrs) -> None:
-        """Write what is left and mark the run ``complete`` or ``failed`` (with the reason)."""
+        """Write what is left and mark the run ``complete`` or ``failed`` (with the reason).
+
+        On a disk with no room for the rows kept (``check_room``) they are dropped, the run is
+        marked ``failed`` with the reason, and the file keeps every row written before."""
+        try:
+            check_room(self.path, self._needed(), "writing the last rows")
+        except DiskFullError as exc:
+            for rows in (*self.series.values(), *self.frames.values()):
+                rows.clear()
+            self._buffered = 0
+            if "the disk is full" not in failure:
+                failure = f"{failure}; {exc}" if failure else str(exc)
+            status = "failed"
+            attrs.pop("steps", None)  # the steps of the rows written
         with _open_for_write(self.path) as f:
             self._write(
                 f,

@@ -20,7 +20,7 @@ from taichi_ice import Simulation, load_scenario
 from taichi_ice import checkpoint as ckpt
 from taichi_ice.cli import main
 from taichi_ice.errors import RunFileError
-from taichi_ice.io import read_run
+from taichi_ice.io import DiskFullError, read_run
 from taichi_ice.world import World
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -135,3 +135,120 @@ def test_a_checkpoint_with_a_damaged_attribute_is_one_clear_error(scene, tmp_pat
         f.attrs["n_samples"] = "[1, 2"
     with pytest.raises(RunFileError, match="damaged checkpoint"):
         ckpt.read(ckpt.path_for(path))
+
+
+# --------------------------------------------------------------------------------------------
+# A full disk
+# --------------------------------------------------------------------------------------------
+
+
+def test_a_full_disk_stops_the_run_with_its_file_whole_and_resume_finishes_it(
+    scene, tmp_path, monkeypatch
+):
+    """The disk fills during the run (simulated: the file system reports less and less free
+    space): the run stops with a DiskFullError before the write that would not fit, the file
+    says ``failed`` and why and holds every row written before, the checkpoint is kept, and
+    once there is room ``resume`` finishes it equal to a run never stopped."""
+    import shutil as real_shutil
+
+    import taichi_ice.io as runio
+
+    whole = run(scene, tmp_path / "whole.h5", 0.1)
+    usage = real_shutil.disk_usage
+    calls = {"n": 0}
+
+    def filling(path):
+        calls["n"] += 1
+        free = 0 if calls["n"] > 12 else 1 << 40
+        return usage(path)._replace(free=free)
+
+    monkeypatch.setattr(runio.shutil, "disk_usage", filling)
+    path = tmp_path / "full.h5"
+    with pytest.raises(DiskFullError, match="the disk is full"):
+        run(scene, path, 0.1, flush_every=0, checkpoint_every=0)
+    monkeypatch.setattr(runio.shutil, "disk_usage", usage)
+    stopped = read_run(path)
+    assert stopped["attrs"]["status"] == "failed"
+    assert "the disk is full" in stopped["attrs"]["failure"]
+    assert 0 < len(stopped["frames"]["time"]) < len(whole.series[0]["time"])
+    assert ckpt.path_for(path).exists()
+
+    result = run(scene, path, 0.1, resume=True)
+    assert result.status == "complete"
+    done = read_run(path)
+    for name, values in read_run(tmp_path / "whole.h5")["series"].items():
+        np.testing.assert_array_equal(done["series"][name], values, err_msg=name)
+
+
+def test_a_run_on_a_real_full_file_system_stops_cleanly(scene, tmp_path):
+    """The same on a tmpfs of 1.5 MB (root only): the pillar's run file outgrows it."""
+    import subprocess
+
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=1500k", "tmpfs", str(mnt)], capture_output=True
+    )
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.decode().strip()}")
+    try:
+        path = mnt / "p.h5"
+        pillar = load_scenario("pillar")
+        with pytest.raises(DiskFullError):
+            Simulation(pillar).run(until=20.0, out=path, flush_every=0, checkpoint_every=0)
+        got = read_run(path)
+        assert got["attrs"]["status"] == "failed"
+        assert "the disk is full" in got["attrs"]["failure"]
+        assert len(got["frames"]["time"]) > 1
+        assert ckpt.read(ckpt.path_for(path))["attrs"]["steps"] > 0
+    finally:
+        subprocess.run(["umount", str(mnt)], capture_output=True)
+
+
+# --------------------------------------------------------------------------------------------
+# Bodies that would pass through each other
+# --------------------------------------------------------------------------------------------
+
+
+def head_on(speed: float):
+    import copy
+
+    from taichi_ice.scenario import scene_from_dict
+
+    raw = copy.deepcopy(dict(load_scenario(TWO_SQUARES).raw))
+    raw["body"][0]["velocity"] = [speed, 0.0]
+    raw["body"][1]["velocity"] = [-speed, 0.0]
+    return scene_from_dict(raw, source=f"head-on at {speed:g} m/s")
+
+
+def test_blocks_fast_enough_to_pass_through_each_other_are_refused_up_front(monkeypatch):
+    """Two 1 m squares head-on: at 1,000 m/s each they pass through each other (the run
+    used to end "complete", each square on the other's side); now the scene is refused,
+    naming the body and the speed the contact resolves. At 100 m/s they bounce back."""
+    import taichi_ice.simulation as simulation
+    from taichi_ice.errors import StabilityError
+
+    with pytest.raises(StabilityError, match="pass through each other"):
+        Simulation(head_on(1000.0))
+    slow = Simulation(head_on(100.0))
+    slow.run(until=0.02)
+    x = slow.positions()[:, 0]
+    assert x[0] < -1.0 and x[1] > 1.0  # bounced: each back on its own side
+    # What the refusal prevents: the same collision, the check off.
+    monkeypatch.setattr(simulation, "_check_approach", lambda scene: None)
+    fast = Simulation(head_on(1000.0))
+    fast.run(until=0.02)
+    x = fast.positions()[:, 0]
+    assert x[0] > 1.0 and x[1] < -1.0  # passed through
+
+
+def test_a_pusher_too_fast_for_the_contacts_is_refused_in_one_line(tmp_path, capsys):
+    scene = tmp_path / "fast_pusher.toml"
+    text = (ROOT / "scenarios" / "pushed_field.toml").read_text()
+    assert "velocity = [0.0, -0.1]" in text
+    scene.write_text(text.replace("velocity = [0.0, -0.1]", "velocity = [0.0, -1000.0]", 1))
+    out = tmp_path / "p.h5"
+    assert main(["run", str(scene), "--until", "0.01", "--out", str(out), "--quiet"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "pusher" in line and "1000 m/s" in line and "pass through" in line
+    assert not out.exists()

@@ -957,7 +957,13 @@ def load_done(out: Path, identity: dict) -> dict[str, dict]:
     that holds a sweep of another scene or settings."""
     state = out / STATE
     if state.exists():
-        old = json.loads(state.read_text())
+        old = _read_json(state)
+        if not isinstance(old, dict):
+            raise SweepError(
+                f"{state}: damaged (not the JSON object a sweep writes), so this folder's "
+                "settings cannot be checked; give another --out, or delete the folder (or this "
+                "file, if you are sure the folder holds this sweep) to start again"
+            )
         diff = [k for k in identity if old.get(k) != identity[k]]
         if diff:
             said = ", ".join(f"{k}: {old.get(k)!r} there, {identity[k]!r} now" for k in diff)
@@ -967,16 +973,44 @@ def load_done(out: Path, identity: dict) -> dict[str, dict]:
             )
     done: dict[str, dict] = {}
     for path in sorted((out / BATCH_DIR).glob("batch-*.json")):
-        batch = json.loads(path.read_text())
-        for w in batch["worlds"]:
-            done[w["key"]] = {**w, "batch": batch["id"], "worker": batch["worker"]}
+        batch = _read_json(path)
+        try:
+            worlds = [
+                {**w, "batch": batch["id"], "worker": batch["worker"]} for w in batch["worlds"]
+            ]
+            keys = [w["key"] for w in worlds]
+        except (TypeError, KeyError):
+            worlds = None
+        if worlds is None:
+            # Written whole or not at all, so damaged from outside: set aside, and its
+            # worlds run again.
+            aside = path.with_name(path.name + ".damaged")
+            os.replace(path, aside)
+            print(
+                f"sweep: {path} is damaged; moved to {aside.name}, its worlds run again",
+                file=sys.stderr,
+            )
+            continue
+        done.update(zip(keys, worlds))
     return done
 
 
+def _read_json(path: Path) -> Any:
+    """The JSON in ``path``, or None if it is not JSON (truncated, empty, garbled)."""
+    try:
+        return json.loads(path.read_bytes().decode("utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        return None
+
+
 def _write_json(path: Path, data: Any) -> None:
-    """Write ``data`` whole or not at all (a kill mid-write leaves no half file)."""
+    """Write ``data`` whole or not at all (a kill mid-write leaves no half file; fsync
+    before the rename, so that a power cut does not leave an empty file in its place)."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1, allow_nan=True) + "\n")
+    with open(tmp, "w") as fh:
+        fh.write(json.dumps(data, indent=1, allow_nan=True) + "\n")
+        fh.flush()
+        os.fsync(fh.fileno())
     os.replace(tmp, path)
 
 
@@ -1060,7 +1094,11 @@ def run_sweep(
 
     wall = time.perf_counter() - start
     log_path = out / LOG
-    log = json.loads(log_path.read_text()) if log_path.exists() else []
+    log = _read_json(log_path) if log_path.exists() else []
+    if not isinstance(log, list):  # damaged: kept aside, a new log begins
+        os.replace(log_path, log_path.with_name(log_path.name + ".damaged"))
+        print(f"sweep: {log_path} was damaged; kept as {log_path.name}.damaged", file=sys.stderr)
+        log = []
     log.append(
         {
             "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(time.time() - wall)),

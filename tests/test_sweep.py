@@ -323,3 +323,33 @@ def test_the_batches_of_a_layout_share_one_world_in_a_process(sweep_dir, monkeyp
     expected = open_sweep(by4.path)
     assert (expected.status.values == "complete").all()
     _equal(got, expected, [*sweep.metrics, "steps", "dt", "seed", "mu", "status"])
+
+
+def test_a_damaged_batch_file_is_set_aside_and_its_worlds_run_again(sweep_dir, capsys):
+    """A truncated batch file and a garbled log (damage from outside: both are written whole
+    or not at all) used to stop the sweep with a JSONDecodeError naming no file. Now the
+    batch file is moved aside with a line naming it, only its worlds run again, and the
+    dataset equals the undamaged one, value for value; a garbled settings file is one
+    SweepError naming it."""
+    from taichi_ice.dataset import open_sweep
+
+    sweep = dataclasses.replace(load_sweep(sweep_dir / "sweep.toml"), batch_size=4)
+    out = sweep_dir / "out"
+    first = run_sweep(sweep, out, workers=0, progress=False)
+    expected = open_sweep(first.path)
+    batches = sorted((out / "batches").glob("batch-*.json"))
+    assert len(batches) == 2
+    damaged = batches[0]
+    damaged.write_text(damaged.read_text()[:40])  # truncated
+    (out / "sweep-log.json").write_bytes(b"\xff\xfe not json")
+    capsys.readouterr()
+    again = run_sweep(sweep, out, workers=0, progress=False)
+    err = capsys.readouterr().err
+    assert str(damaged) in err and "run again" in err
+    assert len(again.ran) == 4 and not again.failed_batches
+    assert damaged.with_name(damaged.name + ".damaged").exists()
+    _equal(open_sweep(again.path), expected, [*sweep.metrics, "steps", "dt", "seed", "mu"])
+
+    (out / "sweep-state.json").write_text("{")
+    with pytest.raises(SweepError, match=r"sweep-state\.json: damaged"):
+        run_sweep(sweep, out, workers=0, progress=False)

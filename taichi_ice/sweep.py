@@ -77,7 +77,7 @@ import numpy as np
 from ._version import __version__
 from .codes import ThetaMethod
 from .ensemble import METRICS
-from .errors import Interrupted, ScenarioError, TaichiIceError
+from .errors import Interrupted, OutputError, ScenarioError, TaichiIceError
 from .table import Table, check_keys, is_number, type_name
 
 __all__ = [
@@ -1044,11 +1044,31 @@ def run_sweep(
         SweepResult. Batches that raised are listed in ``failed_batches``; their worlds are
         NaN with status 'missing' in the dataset, and a resume runs them.
     """
+    from .io import RunLock
+
+    out = Path(out)
+    (out / BATCH_DIR).mkdir(parents=True, exist_ok=True)
+    # One sweep a folder: two would both run the missing worlds and race on the dataset.
+    lock = RunLock(out / "sweep")
+    try:
+        lock.acquire()
+    except OutputError:
+        other = lock.owner()
+        raise SweepError(
+            f"{out}: another sweep is running in this folder (pid {other.get('pid', '?')} on "
+            f"{other.get('host', '?')} since {other.get('since', '?')}); wait for it, or "
+            f"give another --out (if it is gone, delete {lock.path})"
+        ) from None
+    try:
+        return _run_sweep(sweep, out, workers, scheduler, arch, precision, progress)
+    finally:
+        lock.release()
+
+
+def _run_sweep(sweep, out: Path, workers, scheduler, arch, precision, progress) -> SweepResult:
     from .dataset import build_dataset, write_dataset
 
     start = time.perf_counter()
-    out = Path(out)
-    (out / BATCH_DIR).mkdir(parents=True, exist_ok=True)
     identity = _identity(sweep, arch, precision)
     done = load_done(out, identity)
     _write_json(out / STATE, identity)

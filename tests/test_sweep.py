@@ -353,3 +353,32 @@ def test_a_damaged_batch_file_is_set_aside_and_its_worlds_run_again(sweep_dir, c
     (out / "sweep-state.json").write_text("{")
     with pytest.raises(SweepError, match=r"sweep-state\.json: damaged"):
         run_sweep(sweep, out, workers=0, progress=False)
+
+
+def test_a_second_sweep_on_a_folder_in_use_is_refused_and_a_stale_lock_is_taken_over(
+    sweep_dir,
+):
+    """Two sweeps on one --out both ran the missing worlds and raced on the dataset; now the
+    folder is locked by the sweep running in it (``out/sweep.lock``: pid, host, command),
+    a second is one SweepError naming the first, and the lock of a process that is gone is
+    taken over."""
+    import json as _json
+    import socket
+    import subprocess
+    import sys
+
+    sweep = load_sweep(sweep_dir / "sweep.toml")
+    out = sweep_dir / "out"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock = {"pid": holder.pid, "host": socket.gethostname(), "since": "now"}
+        (out / "sweep.lock").write_text(_json.dumps(lock))
+        with pytest.raises(SweepError, match=f"another sweep is running.*pid {holder.pid}"):
+            run_sweep(sweep, out, workers=0, progress=False)
+    finally:
+        holder.kill()
+        holder.wait()
+    result = run_sweep(sweep, out, workers=0, progress=False)  # its holder is gone now
+    assert not result.failed_batches
+    assert not (out / "sweep.lock").exists()

@@ -568,10 +568,13 @@ class RunWriter:
         """Write what is left and mark the run ``complete`` or ``failed`` (with the reason).
 
         On a disk with no room for the rows kept (``check_room``) they are dropped, the run is
-        marked ``failed`` with the reason, and the file keeps every row written before."""
+        marked ``failed`` with the reason, and the file keeps every row written before; a run
+        that was to be marked ``complete`` then raises the DiskFullError once marked."""
+        full = None
         try:
             check_room(self.path, self._needed(), "writing the last rows")
         except DiskFullError as exc:
+            full = exc if status == "complete" else None
             for rows in (*self.series.values(), *self.frames.values()):
                 rows.clear()
             self._buffered = 0
@@ -585,6 +588,8 @@ class RunWriter:
                 int(attrs.pop("steps", f.attrs.get("steps", 0))),
                 {"status": status, "failure": failure, "finished": provenance.now(), **attrs},
             )
+        if full is not None:
+            raise full
 
 
 def _describe(ds, group: str, name: str) -> None:

@@ -33,7 +33,7 @@ from .errors import (
     TaichiIceError,
     UsageError,
 )
-from .io import RunWriter
+from .io import DiskFullError, RunWriter
 
 # The most samples one stepping launch takes (Simulation.run): 0.64 s of the paper's scene
 # at its 0.01 s series interval.
@@ -509,9 +509,15 @@ class Simulation:
         finally:
             wall = _time.perf_counter() - start
             bar.close()
+            unwritten = None
             for w in writers:
                 steps = seen if status == "failed" else self.world.steps
-                w.close(status, failure, steps=steps, wall_time=wall, warning=warning)
+                try:
+                    w.close(status, failure, steps=steps, wall_time=wall, warning=warning)
+                except DiskFullError as exc:  # marked failed; every file is closed first
+                    unwritten = unwritten or exc
+            if unwritten is not None:
+                raise unwritten
         result = self._result(series, paths, status, failure, start, self.world.steps)
         result.warning = warning
         return result

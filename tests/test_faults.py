@@ -252,3 +252,29 @@ def test_a_pusher_too_fast_for_the_contacts_is_refused_in_one_line(tmp_path, cap
     line = one_line(capsys.readouterr().err)
     assert "pusher" in line and "1000 m/s" in line and "pass through" in line
     assert not out.exists()
+
+
+def test_a_disk_that_fills_before_the_last_write_fails_the_run_it_does_not_pass(
+    scene, tmp_path, monkeypatch
+):
+    """No room for the rows kept at the end of a run that otherwise completed: the file is
+    marked failed (not complete) and whole, and the run raises, not returns."""
+    import shutil as real_shutil
+
+    import taichi_ice.io as runio
+
+    usage = real_shutil.disk_usage
+    calls = {"n": 0}
+
+    def full_after_the_first_call(path):
+        calls["n"] += 1
+        return usage(path)._replace(free=0 if calls["n"] > 1 else 1 << 40)
+
+    monkeypatch.setattr(runio.shutil, "disk_usage", full_after_the_first_call)
+    path = tmp_path / "last.h5"
+    with pytest.raises(DiskFullError, match="writing the last rows"):
+        run(scene, path, 0.03, flush_every=3600)
+    monkeypatch.setattr(runio.shutil, "disk_usage", usage)
+    got = read_run(path)
+    assert got["attrs"]["status"] == "failed"
+    assert "the disk is full" in got["attrs"]["failure"]

@@ -344,7 +344,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="accept a dt above the stability limit (for stability studies)",
     )
     p.add_argument("--slots", type=int, default=None, help="contact slots per body")
-    p.add_argument("--overwrite", action="store_true", help="replace the output file if it exists")
     p.add_argument(
         "--checkpoint-every",
         type=parse_duration,
@@ -353,7 +352,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="write the whole state to OUT.ckpt every DURATION of wall clock (30s, 10min, 1h), "
         "at a frame, and when stopped by Ctrl-C or SIGTERM",
     )
-    p.add_argument(
+    again = p.add_mutually_exclusive_group()
+    again.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output file if it exists (and remove its checkpoint)",
+    )
+    again.add_argument(
         "--resume",
         action="store_true",
         help="continue the run in --out from its last checkpoint (same scene and options)",

@@ -278,3 +278,12 @@ def test_a_disk_that_fills_before_the_last_write_fails_the_run_it_does_not_pass(
     got = read_run(path)
     assert got["attrs"]["status"] == "failed"
     assert "the disk is full" in got["attrs"]["failure"]
+
+
+def test_resume_and_overwrite_together_are_refused(tmp_path, capsys):
+    out = tmp_path / "both.h5"
+    with pytest.raises(SystemExit) as info:
+        main(["run", TWO_SQUARES, "--out", str(out), "--resume", "--overwrite"])
+    assert info.value.code == 2
+    assert "not allowed with argument" in capsys.readouterr().err
+    assert not out.exists()

@@ -74,8 +74,15 @@ def plot_run(
     plt = _pyplot()
     path = Path(path)
     out = Path(out_dir) if out_dir else path.parent
-    out.mkdir(parents=True, exist_ok=True)
     run = read_run(path)
+    if not len(run["series"]["time"]) or not len(run["frames"]["time"]):
+        from .errors import UsageError
+
+        raise UsageError(
+            f"{path}: the run has no sample or frame yet (status {run['attrs']['status']}); "
+            "nothing to plot"
+        )
+    out.mkdir(parents=True, exist_ok=True)
     s, names = run["series"], run["bodies"]["names"]
     t = s["time"]
     written = []

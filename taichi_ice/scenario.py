@@ -507,6 +507,15 @@ def _parse_field(source: str, index: int, data: Any) -> FieldSpec:
 def _check_names(source: str, bodies: list[Body], labels: list[str]) -> None:
     first: dict[str, int] = {}
     for i, b in enumerate(bodies):
+        bad = next((c for c in b.name if not c.isprintable()), None)
+        if bad is not None:
+            # A NUL cannot be stored in the run file's names (HDF5 strings end at it), and
+            # the other control characters garble every table and message that shows it.
+            raise ScenarioError(
+                f"{source}: {labels[i].encode('unicode_escape').decode()}, key 'name': "
+                f"{b.name!r} holds the control character "
+                f"{bad!r}; use printable characters"
+            )
         if b.name in first:
             raise ScenarioError(
                 f"{source}: {labels[i]}, key 'name': the name '{b.name}' is already used by "

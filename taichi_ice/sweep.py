@@ -305,7 +305,16 @@ def load_sweep(path: str | Path) -> Sweep:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise SweepError(f"{path}: cannot read the sweep file ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise SweepError(_not_utf8(path, exc)) from None
     return parse_sweep(text, source=str(path), base_dir=path.parent)
+
+
+def _not_utf8(path, exc: UnicodeDecodeError) -> str:
+    return (
+        f"{path}: not UTF-8 text (byte {exc.object[exc.start]:#04x} at offset {exc.start}); "
+        "TOML files are UTF-8: save it as UTF-8"
+    )
 
 
 def parse_sweep(text: str, source: str = "<string>", base_dir=".") -> Sweep:
@@ -1349,6 +1358,8 @@ def sweep_from_args(args) -> Sweep:
             raise SweepError(
                 f"{path}: cannot read the sweep file ({exc.strerror or exc})"
             ) from None
+        except UnicodeDecodeError as exc:
+            raise SweepError(_not_utf8(path, exc)) from None
         except TOMLDecodeError as exc:
             raise SweepError(f"{path}: TOML syntax error: {exc}") from None
         source, base_dir = str(path), path.parent

@@ -22,7 +22,17 @@ else:  # the tomli backport has the same API
 __all__ = ["TOMLDecodeError", "dump_toml", "loads"]
 
 TOMLDecodeError = tomllib.TOMLDecodeError
-loads = tomllib.loads
+
+
+def loads(text: str) -> dict[str, Any]:
+    """``tomllib.loads``; arrays or tables nested deeper than Python's recursion limit are a
+    TOMLDecodeError too (tomllib recurses once a level and raised RecursionError)."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise TOMLDecodeError(
+            "arrays or tables nested too deeply to read (more than about a thousand levels)"
+        ) from None
 
 
 def dump_toml(data: Mapping[str, Any]) -> str:

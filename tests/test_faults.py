@@ -287,3 +287,55 @@ def test_resume_and_overwrite_together_are_refused(tmp_path, capsys):
     assert info.value.code == 2
     assert "not allowed with argument" in capsys.readouterr().err
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Hostile input: one line, no traceback
+# --------------------------------------------------------------------------------------------
+
+
+def test_toml_nested_too_deeply_is_one_line_for_scenes_and_sweeps(tmp_path, capsys):
+    """tomllib recurses once a level: 1e5 nested arrays were a RecursionError traceback."""
+    deep = tmp_path / "deep.toml"
+    deep.write_text("a = " + "[" * 100_000 + "\n")
+    for argv in (
+        ["run", str(deep), "--out", str(tmp_path / "d.h5")],
+        ["sweep", str(deep), "--out", str(tmp_path / "sweep"), "--workers", "0"],
+    ):
+        assert main(argv) == 2
+        assert "nested too deeply" in one_line(capsys.readouterr().err)
+    assert not (tmp_path / "d.h5").exists()
+
+
+def test_a_sweep_file_that_is_not_utf8_is_one_line(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(b"\xff\xfe[sweep]\n")
+    assert main(["sweep", str(bad), "--out", str(tmp_path / "sweep"), "--workers", "0"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert str(bad) in line and "UTF-8" in line and "0xff" in line
+
+
+def test_a_body_name_with_a_nul_is_refused_before_a_file_is_made(tmp_path, capsys):
+    """h5py cannot store a NUL in a string: the run used to fail after creating its file,
+    which stayed 'running' forever."""
+    scene = tmp_path / "nul.toml"
+    text = Path(TWO_SQUARES).read_text()
+    assert 'name = "left"' in text
+    scene.write_text(text.replace('name = "left"', 'name = "le\\u0000ft"', 1))
+    out = tmp_path / "nul.h5"
+    assert main(["run", str(scene), "--out", str(out), "--until", "0.01"]) == 2
+    line = one_line(capsys.readouterr().err)
+    assert "key 'name'" in line and "control character" in line and "\x00" not in line
+    assert not out.exists()
+
+
+def test_plotting_a_run_with_no_rows_yet_is_one_line_and_makes_nothing(scene, tmp_path, capsys):
+    """A run killed before its first write: plot used to raise IndexError."""
+    from taichi_ice.io import RunWriter
+
+    path = tmp_path / "empty.h5"
+    RunWriter(path, scene, {})  # created, never written to
+    out = tmp_path / "figures"
+    assert main(["plot", str(path), "--out", str(out)]) == 2
+    assert "no sample or frame yet" in one_line(capsys.readouterr().err)
+    assert not out.exists()

@@ -9,6 +9,7 @@ as Ctrl-C does: its file is closed, marked failed with the reason, and kept.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import re
 import signal
@@ -112,12 +113,17 @@ def _cmd_run(args) -> int:
     from .scenario import load_scenario
 
     out = args.out or str(Path("runs") / (Path(args.scene).stem + ".h5"))
+    folder = Path(out).parent
+    made = not folder.exists()
     # The output is claimed (checked, locked) before the scene is read or Taichi starts.
     io.claim(out, overwrite=args.overwrite, resume=args.resume, inputs=[args.scene])
     try:
         return _run_scene(args, load_scenario(args.scene), out)
     finally:
         io.release(out)
+        if made:  # a folder the claim made and nothing was written to: not left behind
+            with contextlib.suppress(OSError):
+                folder.rmdir()
 
 
 def _run_scene(args, scene, out: str) -> int:

@@ -339,3 +339,11 @@ def test_plotting_a_run_with_no_rows_yet_is_one_line_and_makes_nothing(scene, tm
     assert main(["plot", str(path), "--out", str(out)]) == 2
     assert "no sample or frame yet" in one_line(capsys.readouterr().err)
     assert not out.exists()
+
+
+def test_a_bad_scene_run_without_out_leaves_no_runs_folder(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.toml").write_text("[simulation]\nduration = -1\n")
+    assert main(["run", "bad.toml"]) == 2
+    assert "duration" in one_line(capsys.readouterr().err)
+    assert not (tmp_path / "runs").exists()

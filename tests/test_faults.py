@@ -347,3 +347,21 @@ def test_a_bad_scene_run_without_out_leaves_no_runs_folder(tmp_path, capsys, mon
     assert main(["run", "bad.toml"]) == 2
     assert "duration" in one_line(capsys.readouterr().err)
     assert not (tmp_path / "runs").exists()
+
+
+def test_bench_checks_its_outputs_and_seed_before_benchmarking(tmp_path, capsys):
+    """bench found an unwritable --out only after benchmarking (the results lost), wrote
+    --name ../../x outside --out, and took --seed -1 into a traceback."""
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    for argv, words in (
+        (["--name", "../../x"], "plain file name"),
+        (["--out", str(afile / "sub")], "cannot write there"),
+    ):
+        assert main(["bench", "--quick", "--no-box2d", *argv]) == 2
+        assert words in one_line(capsys.readouterr().err)
+    with pytest.raises(SystemExit) as info:
+        main(["bench", "--quick", "--seed", "-1"])
+    assert info.value.code == 2
+    assert "0 or more" in capsys.readouterr().err
+    assert not list(tmp_path.parent.glob("x*"))

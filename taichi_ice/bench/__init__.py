@@ -99,9 +99,13 @@ def add_options(p: argparse.ArgumentParser) -> None:
         help="random: diamonds at random angles, 55 %% of the box (default); lattice: "
         "zig-zag columns of touching diamonds, 54 %%",
     )
-    p.add_argument("--seed", type=int, default=0, help="seeds the placement and the velocities")
+    p.add_argument(
+        "--seed", type=_seed, default=0, help="seeds the placement and the velocities (>= 0)"
+    )
     p.add_argument("--out", type=Path, default=Path("out/bench"), help="results folder")
-    p.add_argument("--name", default="bench", help="file name of the outputs (default bench)")
+    p.add_argument(
+        "--name", default="bench", help="file name of the outputs in --out (default bench)"
+    )
     p.add_argument(
         "--box2d",
         action=argparse.BooleanOptionalAction,
@@ -150,8 +154,37 @@ def add_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: use a whole number, 0 or more")
+    return value
+
+
+def _check_outputs(out: Path, name: str) -> None:
+    """Refuse, before any benchmarking, a ``--name`` that is not a plain file name and an
+    ``--out`` that cannot be written (the results would be lost at the end)."""
+    if not name or name in (".", "..") or Path(name).name != name or "\\" in name:
+        raise TaichiIceError(
+            f"bench --name {name!r}: give a plain file name (no folders); --out says where"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=f".{name}-", suffix=".probe"):
+            pass
+    except OSError as exc:
+        raise TaichiIceError(
+            f"bench --out {out}: cannot write there ({exc.strerror or exc}); give a folder "
+            "you can write to"
+        ) from None
+
+
 def bench_command(args: argparse.Namespace) -> int:
     """Run the benchmark that ``args`` (``add_options``) describes; 1 if a size failed."""
+    _check_outputs(Path(args.out), args.name)
     sizes = args.sizes or ([1_000] if args.quick else list(DEFAULT_SIZES))
     steps = args.steps or (QUICK_STEPS if args.quick else DEFAULT_STEPS)
     precisions = list(dict.fromkeys(args.precision))

@@ -424,11 +424,14 @@ class RunWriter:
                         f.attrs[key] = value
             return
         self.n_samples = self.n_frames = 0
+        # Checked before the old file goes (counting the room it frees), so that a full disk
+        # refuses the run with the old file still there.
+        old = self.path.stat().st_size if self.path.is_file() else 0
+        check_room(self.path, -old, "a new run file", started=False)
         with contextlib.suppress(FileNotFoundError):
             # Unlink, not truncate: a reader that holds the old file keeps it whole.
             self.path.unlink()
         self.run_id = uuid.uuid4().hex
-        check_room(self.path, 0, "a new run file", started=False)
         with h5py.File(self.path, "w", track_order=True) as f:
             self._create(f, scene, attrs)
             f.attrs["run_id"] = self.run_id

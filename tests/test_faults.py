@@ -365,3 +365,23 @@ def test_bench_checks_its_outputs_and_seed_before_benchmarking(tmp_path, capsys)
     assert info.value.code == 2
     assert "0 or more" in capsys.readouterr().err
     assert not list(tmp_path.parent.glob("x*"))
+
+
+def test_a_full_disk_refuses_an_overwrite_with_the_old_file_still_whole(
+    scene, tmp_path, monkeypatch
+):
+    import shutil as real_shutil
+
+    import taichi_ice.io as runio
+
+    path = tmp_path / "old.h5"
+    run(scene, path, 0.02)
+    before = read_run(path)
+    usage = real_shutil.disk_usage
+    monkeypatch.setattr(runio.shutil, "disk_usage", lambda p: usage(p)._replace(free=0))
+    with pytest.raises(DiskFullError, match="nothing was written"):
+        run(scene, path, 0.02)
+    monkeypatch.setattr(runio.shutil, "disk_usage", usage)
+    after = read_run(path)
+    assert after["attrs"]["run_id"] == before["attrs"]["run_id"]
+    np.testing.assert_array_equal(after["series"]["time"], before["series"]["time"])

@@ -163,9 +163,11 @@ def restore(sim, ckpt: dict, where: str | Path) -> None:
             "that version, or start anew with --overwrite"
         )
     ident = identity(sim)
+    # The law first: a scene's text holds its [friction] table, so another law (--friction)
+    # would otherwise be reported as another scene.
     for key, now, then in (
-        ("scene", ident["scenarios"], a["scenarios"]),
         ("friction law", ident["frictions"], a["frictions"]),
+        ("scene", ident["scenarios"], a["scenarios"]),
         ("dt", ident["dt"], float(a["dt"])),
         ("precision", ident["precision"], a["precision"]),
     ):

@@ -385,3 +385,15 @@ def test_a_full_disk_refuses_an_overwrite_with_the_old_file_still_whole(
     after = read_run(path)
     assert after["attrs"]["run_id"] == before["attrs"]["run_id"]
     np.testing.assert_array_equal(after["series"]["time"], before["series"]["time"])
+
+
+def test_resuming_with_another_friction_law_names_the_law(scene, tmp_path):
+    """A checkpoint of a Coulomb run resumed with rate-and-state used to be reported as
+    "its scene differs"."""
+    from taichi_ice.friction import RateState
+
+    path = tmp_path / "law.h5"
+    run(scene, path, 0.04, checkpoint_every=0)
+    with pytest.raises(RunFileError, match="its friction law differs"):
+        Simulation(scene, friction=RateState()).run(until=0.08, out=path, resume=True)
+    assert read_run(path)["attrs"]["status"] == "complete"

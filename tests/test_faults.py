@@ -1,10 +1,15 @@
 """Nothing lost, nothing silent (issue 27): a run that crashes says so in its file, a dt too
-small to count is refused, and a resume never continues one run from another's checkpoint.
+small to count is refused, a resume never continues one run from another's checkpoint, a
+full disk stops a run with its file whole, blocks that would pass through each other are
+refused, and hostile input is one line.
 
 Each test reproduces a fault found by trying the landed code as a hostile user would: an
 OverflowError from ``--dt 1e-300`` left a file marked ``complete`` with 0 steps; a stale
 checkpoint left by a finished run was restored into the run that overwrote it, padding its
-file with rows of zeros marked ``complete``; a checkpoint of another run was accepted.
+file with rows of zeros marked ``complete``; a checkpoint of another run was accepted; a
+full disk segfaulted the run and left its file unreadable; two squares at 1,000 m/s passed
+through each other "complete"; deep TOML, a NUL in a name and an empty run were tracebacks.
+Each test fails on the code before its fix.
 """
 
 from __future__ import annotations

@@ -26,6 +26,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from ..cli import _nonnegative_int
 from ..errors import TaichiIceError
 from . import box2d, report
 from .scenes import SCENES, check_size
@@ -100,7 +101,10 @@ def add_options(p: argparse.ArgumentParser) -> None:
         "zig-zag columns of touching diamonds, 54 %%",
     )
     p.add_argument(
-        "--seed", type=_seed, default=0, help="seeds the placement and the velocities (>= 0)"
+        "--seed",
+        type=_nonnegative_int,
+        default=0,
+        help="seeds the placement and the velocities (>= 0)",
     )
     p.add_argument("--out", type=Path, default=Path("out/bench"), help="results folder")
     p.add_argument(
@@ -152,16 +156,6 @@ def add_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help=f"smoke run: 1e3 blocks, {QUICK_STEPS} steps, a smaller bandwidth copy",
     )
-
-
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: use a whole number, 0 or more")
-    return value
 
 
 def _check_outputs(out: Path, name: str) -> None:

@@ -51,7 +51,7 @@ from .scene import (
     _frozen,
 )
 from .table import REQUIRED, Table, array_of_tables, check_keys, type_name
-from .timestep import DEFAULT_SAFETY
+from .timestep import DEFAULT_SAFETY, body_contact_limit, contact_damping
 from .tomlio import TOMLDecodeError, dump_toml, loads
 
 if TYPE_CHECKING:
@@ -271,7 +271,7 @@ def scene_from_dict(
     )
     _check_mass(scene, labels)
     _check_extent(scene, labels)
-    _check_time_step(scene)
+    _check_time_step(scene, labels)
     _check_overlaps(scene, labels)
     return scene
 
@@ -555,7 +555,7 @@ def _check_extent(scene: Scene, labels: list[str]) -> None:
         )
 
 
-def _check_time_step(scene: Scene) -> None:
+def _check_time_step(scene: Scene, labels: list[str]) -> None:
     sim = scene.simulation
     limit = scene.stable_dt
     dt = sim.dt if sim.dt is not None else scene.dt
@@ -563,8 +563,7 @@ def _check_time_step(scene: Scene) -> None:
         raise ScenarioError(
             f"{scene.source}: [simulation]: duration = {sim.duration:g} s at dt = {dt:.3g} s "
             f"(stable limit {limit:.3g} s) is {sim.duration / max(dt, 1e-300):.3g} steps, more "
-            f"than {MAX_STEPS:.0e}: shorten the duration, or give the smallest blocks real "
-            "floe sizes (the stable dt follows the lightest block)"
+            f"than {MAX_STEPS:.0e}: {_what_sets_the_limit(scene, labels)}"
         )
     if sim.dt is None:
         return
@@ -576,6 +575,53 @@ def _check_time_step(scene: Scene) -> None:
             f"{sim.dt_safety * limit:.3g} s), a dt below the limit, or force_dt = true for a "
             "stability study"
         )
+
+
+def _what_sets_the_limit(scene: Scene, labels: list[str]) -> str:
+    """The fix for a stable dt too small to run: the block and the [ice] keys that set it."""
+    ice = scene.ice
+    worst, limits = None, {}
+    for i, b in enumerate(scene.bodies):
+        if b.kind != BodyKind.DYNAMIC.label:
+            continue
+        key = b.vertices.tobytes()
+        if key not in limits:
+            limits[key] = body_contact_limit(
+                b.vertices,
+                ice.density,
+                ice.thickness,
+                ice.contact_stiffness,
+                ice.contact_viscosity,
+                ice.tangential_stiffness,
+                ice.tangential_damping,
+            )
+        if worst is None or limits[key] < limits[scene.bodies[worst].vertices.tobytes()]:
+            worst = i
+    if worst is None:
+        return "shorten the duration"
+    _, z = contact_damping(
+        scene.bodies[worst].vertices,
+        ice.density,
+        ice.thickness,
+        ice.contact_stiffness,
+        ice.contact_viscosity,
+    )
+    block = (
+        f"{labels[worst]} weighs {scene.masses[worst]:.3g} kg ([ice] thickness = "
+        f"{ice.thickness:.3g} m, density = {ice.density:.3g} kg/m^3)"
+    )
+    if z > 1.0:
+        return (
+            f"{block}, and [ice] contact_viscosity = {ice.contact_viscosity:.3g} damps its "
+            f"stiffest contact at {z:.3g} x critical, where an explicit dashpot is stable only "
+            "below 2 m_eff / c; lower contact_viscosity (Table 1: 3.16e4) or give the blocks "
+            "a real thickness and size"
+        )
+    return (
+        f"the lightest dynamic block, {block}, against [ice] contact_stiffness = "
+        f"{ice.contact_stiffness:.3g}: give the blocks real floe sizes and thickness, lower "
+        "contact_stiffness, or shorten the duration"
+    )
 
 
 def _check_overlaps(scene: Scene, labels: list[str]) -> None:

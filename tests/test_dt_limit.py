@@ -25,6 +25,7 @@ import pytest
 from taichi_ice import Simulation, budget, load_scenario
 from taichi_ice.cli import main
 from taichi_ice.codes import EnergyTerm
+from taichi_ice.errors import DivergenceError
 from taichi_ice.io import read_run
 from taichi_ice.scenario import scene_from_dict
 from taichi_ice.tomlio import dump_toml
@@ -148,6 +149,42 @@ def test_forced_above_the_limit_and_bounded_completes_with_the_truth_in_the_warn
     assert said in read_run(out)["attrs"]["warning"]
 
 
+# The pillar with contacts 100 times stiffer (contact_stiffness 1e10, so z = 0.04 and the
+# limit is nearly the undamped 2 / w): the pusher drives the jam to ~200 MN on the pillar.
+# Measured over the full 20 s (docs/accuracy.md, "Stiff contacts"): 0.5, 0.7, 0.85, 0.93 and
+# 0.96 x the limit complete with residuals of 0.02-0.36 %; 0.986 diverges at 17.7 s.
+STIFF = 1e10
+STIFF_RUNS, STIFF_DIVERGES = 0.93, 0.986
+
+
+def stiff_pillar(ratio: float):
+    raw = copy.deepcopy(dict(load_scenario(SCENES / "pillar.toml").raw))
+    raw["ice"]["contact_stiffness"] = STIFF
+    limit = scene_from_dict(raw, source="pillar.toml").stable_dt
+    raw["simulation"]["dt"] = ratio * limit
+    return scene_from_dict(raw, source="pillar.toml")
+
+
+@pytest.mark.slow
+def test_stiff_contacts_run_below_the_limit_and_a_run_at_it_is_stopped(taichi_runtime):
+    """Issue 27, item 4: the pillar at contact_stiffness 1e10 and 0.99 x the computed limit
+    used to end complete with a residual of -225 %. Now the guard stops it as diverged (the
+    kinetic energy and the dissipation outrun what came in), and the same scene at 0.93 x
+    runs to its end with the budget closed to 1 %: the limit and the guard agree within
+    the 7 % between the two."""
+    opts = run_opts(taichi_runtime)
+    result = Simulation(stiff_pillar(STIFF_RUNS), **opts).run()
+    assert result.status == "complete"
+    s = result.series[0]
+    assert abs(budget.relative_residual(s)[-1]) < 0.01
+    assert np.max(np.abs(s["probe_force"])) > 1e8  # the jam is loaded: > 100 MN
+
+    with pytest.raises(DivergenceError, match="diverged at dt") as failed:
+        Simulation(stiff_pillar(STIFF_DIVERGES), **opts).run()
+    assert failed.value.result.status == "failed"
+    assert failed.value.result.series[0]["time"][-1] > 10.0  # stopped in the jam, not at once
+
+
 def terms(kinetic=0.0, elastic=0.0, viscous=0.0, friction=0.0, work_in=0.0):
     row = np.zeros(len(EnergyTerm))
     row[EnergyTerm.KINETIC], row[EnergyTerm.ELASTIC] = kinetic, elastic
@@ -169,3 +206,53 @@ def test_the_guard_ignores_the_booking_error_inside_a_collision_not_energy_made(
     # A pusher's work counts as energy in.
     pushed = terms(kinetic=1.0, viscous=100.0, friction=400.0, work_in=500.0)[None]
     assert budget.breached(pushed, np.zeros_like(start)).size == 0
+
+
+def step_matrix_radius(k: float, c: float, m: float, dt: float) -> float:
+    """Spectral radius of one semi-implicit Euler step of ``m x'' + c x' + k x = 0`` (the
+    engine's update: v += dt (-k x - c v) / m, then x += dt v), from NumPy's eigenvalues."""
+    kick = np.array([[1.0, 0.0], [-dt * k / m, 1.0 - dt * c / m]])  # (x, v) -> (x, v')
+    drift = np.array([[1.0, dt], [0.0, 1.0]])  # x += dt v'
+    return float(np.max(np.abs(np.linalg.eigvals(drift @ kick))))
+
+
+@pytest.mark.parametrize("z", [0.0, 0.4, 1.0, 3.0, 1e4, 1e10, 1e24])
+def test_the_oscillator_limit_is_where_the_step_stops_being_stable(z):
+    """``oscillator_limit`` against the eigenvalues of the step matrix, lightly to heavily
+    damped: stable at 0.999 x the limit, unstable at 1.001 x. Before, sqrt(1 + z^2) - z
+    cancelled to 0 above z ~ 1e8 (issue 27, item 9: contact_viscosity = 1e30 gave a limit
+    of 0)."""
+    from taichi_ice.timestep import oscillator_limit
+
+    k, m = 3e7, 40.0
+    c = 2.0 * z * np.sqrt(k * m)
+    limit = oscillator_limit(k, c, m)
+    assert limit > 0.0
+    assert step_matrix_radius(k, c, m, 0.999 * limit) <= 1.0 + 1e-12
+    assert step_matrix_radius(k, c, m, 1.001 * limit) > 1.0 + 1e-4
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "blamed"),
+    [
+        ("contact_viscosity", 1e30, "lower contact_viscosity"),
+        ("thickness", 1e-300, "thickness = 1e-300 m"),
+        ("contact_stiffness", 1e40, "contact_stiffness = 1e+40"),
+    ],
+)
+def test_a_stable_dt_too_small_to_run_names_what_sets_it(key, value, blamed, tmp_path, capsys):
+    """A viscosity of 1e30 or a thickness of 1e-300 gives a positive, tiny limit, and the
+    one-line refusal names the [ice] key that makes it so (it used to report a limit of 0 and
+    blame the block size)."""
+    raw = copy.deepcopy(dict(load_scenario(SCENES / "two_squares.toml").raw))
+    raw["ice"][key] = value
+    path = tmp_path / "tiny.toml"
+    path.write_text(dump_toml(raw))
+    out = tmp_path / "tiny.h5"
+    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert str(path) in err and blamed in err
+    limit = float(err.split("stable limit ")[1].split(" s)")[0])
+    assert limit > 0.0
+    assert not out.exists()

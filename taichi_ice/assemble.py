@@ -23,7 +23,7 @@ import numpy as np
 from . import geometry
 from .codes import BodyKind, ThetaMethod
 from .drag import drag_coefficients
-from .errors import ScenarioError, StabilityError
+from .errors import ScenarioError, StabilityError, UsageError
 from .scene import MAX_VERTICES
 from .schema import SCAN, HostArrays, Layout
 
@@ -38,6 +38,10 @@ from .schema import SCAN, HostArrays, Layout
 # partner and stretch) and 8 more in the neighbour lists; 14 slots had taken 280 B.
 DEFAULT_SMALL_SLOTS = 6
 LARGE_SLOTS = 2
+# Most slots a body may be given (``slots``): a convex block among blocks of its size touches
+# at most a dozen; 64 (~1.3 kB a block of slots and lists) leaves room for a block among
+# small ones. 1e9 used to reach Taichi's allocator (a 40 GB request and a traceback).
+MAX_SLOTS = 64
 
 # A dynamic body that moves more than this fraction of its thinnest dimension in one step
 # has left the regime where contacts can be resolved (it would pass a quarter of the way
@@ -91,6 +95,20 @@ class Batch:
         return [slice(int(start[w]), int(start[w + 1])) for w in range(len(self.scenes))]
 
 
+def check_slots(slots) -> None:
+    """Refuse a ``slots`` that is not None or a whole number from 1 to ``MAX_SLOTS``."""
+    if slots is None:
+        return
+    if isinstance(slots, bool) or not isinstance(slots, (int, np.integer)):
+        raise UsageError(f"slots = {slots!r}: give a whole number of contact slots per body")
+    if not 1 <= slots <= MAX_SLOTS:
+        raise UsageError(
+            f"slots = {slots}: contact slots per body must be 1 to {MAX_SLOTS} (default "
+            f"{DEFAULT_SMALL_SLOTS} plus one per wall or pusher, up to {LARGE_SLOTS}); a run "
+            "that needs more stops and says how many"
+        )
+
+
 def assemble(
     scenes: Sequence,
     dt: float | None = None,
@@ -123,6 +141,7 @@ def assemble(
     scenes = tuple(scenes)
     if not scenes:
         raise ValueError("a batch needs at least one scene")
+    check_slots(slots)
     _check_shared(scenes)
     stable_dt = min(s.stable_dt for s in scenes)
     dt = float(dt) if dt is not None else min(s.dt for s in scenes)
@@ -142,7 +161,11 @@ def assemble(
     arrays.update(_worlds(scenes, coulomb))
     methods = {s.friction.method for s in scenes if hasattr(s.friction, "method")}
     large_per_world = sizes.pop("large_per_world")
-    slots = int(slots) if slots else DEFAULT_SMALL_SLOTS + min(int(large_per_world), LARGE_SLOTS)
+    slots = (
+        int(slots)
+        if slots is not None
+        else DEFAULT_SMALL_SLOTS + min(int(large_per_world), LARGE_SLOTS)
+    )
     layout = Layout(
         **sizes,
         slots=slots,

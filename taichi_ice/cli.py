@@ -263,6 +263,18 @@ def _nonnegative_int(text: str) -> int:
     return value
 
 
+def _slots(text: str) -> int:
+    from .assemble import MAX_SLOTS
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MAX_SLOTS:
+        raise argparse.ArgumentTypeError(f"{text!r}: use 1 to {MAX_SLOTS} contact slots per body")
+    return value
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -349,7 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="accept a dt above the stability limit (for stability studies)",
     )
-    p.add_argument("--slots", type=int, default=None, help="contact slots per body")
+    p.add_argument("--slots", type=_slots, default=None, help="contact slots per body (1-64)")
     p.add_argument(
         "--checkpoint-every",
         type=parse_duration,

@@ -42,6 +42,7 @@ import numpy as np
 
 from . import budget
 from .errors import Interrupted, RunFileError, TaichiIceError, UsageError
+from .limits import check_size
 from .simulation import RunResult
 
 METRICS = (
@@ -216,6 +217,11 @@ def run_ensemble(
     seeds = [int(s) for s in seeds]
     if not seeds:
         raise ValueError("an ensemble needs at least one seed")
+    check_size(
+        len(seeds) * scene.n_bodies,
+        f"ensemble of {len(seeds):,} seeds x {scene.n_bodies:,} bodies",
+        "fewer seeds (taichi_ice.sweep runs many seeds in batches)",
+    )
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds repeat: {seeds}")
     if friction is not None:
@@ -414,8 +420,16 @@ def ensemble_command(
     from .plots import plot_spread
     from .scenario import load_scenario
 
-    out = check_folder(out)  # before any work
+    check_folder(out, make=False)  # before any work
     scene = load_scenario(scene_path)
+    # Every seed is a world of one batch: refuse what cannot fit before any world is built
+    # (1e7 seeds used to grow the process silently).
+    check_size(
+        n_seeds * scene.n_bodies,
+        f"ensemble of {n_seeds:,} seeds x {scene.n_bodies:,} bodies of {scene_path}",
+        "fewer --seeds (taichi-ice sweep runs many seeds in batches)",
+    )
+    out = check_folder(out)
     seeds = [scene.simulation.seed + k for k in range(n_seeds)]
     named: list[tuple[str, object]] = []  # (label, law or None: the scene's)
     for law in laws:

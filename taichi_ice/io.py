@@ -144,9 +144,9 @@ _READ_PAUSE = 0.05  # s
 # --------------------------------------------------------------------------------------------
 
 
-def check_folder(path: str | Path) -> Path:
+def check_folder(path: str | Path, make: bool = True) -> Path:
     """Check that ``path`` can be an output folder (``ensemble --out``, ``paper --out``), and
-    make it.
+    make it (``make=False``: only check that it could be made, and leave nothing behind).
 
     Raises:
         OutputError: the path is a file, lies below a file, or cannot be made or written.
@@ -159,6 +159,10 @@ def check_folder(path: str | Path) -> Path:
         ancestor = ancestor.parent
     if ancestor.exists() and not ancestor.is_dir():
         raise OutputError(f"{p}: cannot be made: {ancestor} is a file, not a folder")
+    if not make:
+        if not os.access(ancestor, os.W_OK | os.X_OK):  # novermin (flags, not a union type)
+            raise OutputError(f"{p}: {ancestor} is not writable; give another --out")
+        return p
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -7,6 +7,7 @@ allocated (``Simulation``), from the body count alone.
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 from .errors import SizeError
@@ -20,20 +21,60 @@ BYTES_PER_BODY = 4096
 MAX_BODIES = 2**31 - 1
 
 
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation now (Linux ``MemAvailable``), else the
-    physical memory, else None when neither can be read."""
-    try:
+def memory_limit() -> tuple[int, str] | None:
+    """``(bytes, what)``: the memory a new allocation of this process can have now, the
+    least of the machine's (Linux ``MemAvailable``, else the physical memory), the job's
+    cgroup (v2 ``memory.max`` less ``memory.current``, or v1's limit less usage: a
+    container's or a batch scheduler's limit) and the address space ``ulimit -v`` leaves
+    (``RLIMIT_AS`` less this process's ``VmSize``); ``what`` names the one that binds.
+    None when none can be read."""
+    found: list[tuple[int, str]] = []
+    with contextlib.suppress(OSError, ValueError, IndexError):
         with open("/proc/meminfo", encoding="ascii") as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (OSError, ValueError, AttributeError):
-        return None
+                    found.append((int(line.split()[1]) * 1024, "this machine has available"))
+                    break
+    if not found:
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            phys = int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+            found.append((phys, "this machine has"))
+    for limit_file, usage_file in (
+        ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+        (
+            "/sys/fs/cgroup/memory/memory.limit_in_bytes",
+            "/sys/fs/cgroup/memory/memory.usage_in_bytes",
+        ),
+    ):
+        with contextlib.suppress(OSError, ValueError):
+            with open(limit_file, encoding="ascii") as fh:
+                text = fh.read().strip()
+            if text != "max" and int(text) < 1 << 60:  # v1 writes a huge number for none
+                with open(usage_file, encoding="ascii") as fh:
+                    used = int(fh.read().strip())
+                found.append((max(int(text) - used, 0), "this job's cgroup leaves"))
+            break
+    with contextlib.suppress(ImportError, OSError, ValueError):
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            found.append((max(soft - _vm_size(), 0), "ulimit -v leaves this process"))
+    return min(found) if found else None
+
+
+def _vm_size() -> int:
+    with open("/proc/self/status", encoding="ascii") as fh:
+        for line in fh:
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def available_memory() -> int | None:
+    """Bytes of memory a new allocation can have now (``memory_limit``), or None."""
+    limit = memory_limit()
+    return None if limit is None else limit[0]
 
 
 def estimate_bytes(n_bodies: int) -> int:
@@ -54,13 +95,20 @@ def check_size(n_bodies: int, where: str, fix: str = "make the scene smaller") -
             f"{MAX_BODIES:,}: {fix}"
         )
     need = estimate_bytes(n)
-    have = available_memory()
-    if have is not None and need > have:
+    limit = memory_limit()
+    if limit is not None and need > limit[0]:
+        have, what = limit
         raise SizeError(
             f"{where}: {n:,} bodies need about {need / 1e9:.3g} GB of memory "
-            f"({BYTES_PER_BODY} bytes each) and this machine has {have / 1e9:.3g} GB "
-            f"available: {fix}"
+            f"({BYTES_PER_BODY} bytes each) and {what} {have / 1e9:.3g} GB: {fix}"
         )
 
 
-__all__ = ["BYTES_PER_BODY", "MAX_BODIES", "available_memory", "check_size", "estimate_bytes"]
+__all__ = [
+    "BYTES_PER_BODY",
+    "MAX_BODIES",
+    "available_memory",
+    "check_size",
+    "estimate_bytes",
+    "memory_limit",
+]

@@ -103,6 +103,12 @@ _DERIVED = {"body": ("speed",), "field": ("speed", "area_fraction")}
 # Worlds per batch at most: on a CPU a batch is stepped a thread per world, and more worlds
 # than threads only lengthen the batch; on a GPU a batch should fill the device.
 MAX_BATCH = {"cpu": 64, "gpu": 4096}
+# Most worlds one sweep runs: its plan, its state file and its results (every world's
+# metrics) are held in memory and rewritten as it goes; 1e8 seeds used to end in a
+# MemoryError after minutes. A million worlds of the pillar scene is ~20 CPU-years.
+MAX_WORLDS = 1_000_000
+# Most workers of the embedded local cluster (one process and one Taichi runtime each).
+MAX_WORKERS = 1024
 # A worker compiles the kernels once per layout (WorldPool); a batch shorter than the others
 # of its kind is padded to their size when running the copies costs less than a compile.
 # Measured on the 2-core VM (pillar scene, 3 worlds): a World built in 4 s and its kernels
@@ -367,6 +373,11 @@ def sweep_from_dict(
     laws = _laws(source, data.get("law"), scene)
     overrides = _overrides(source, data.get("overrides", {}), scene)
     n_worlds = len(laws) * len(seeds) * math.prod(len(v) for v in overrides.values())
+    if n_worlds > MAX_WORLDS:
+        raise SweepError(
+            f"{source}: {len(seeds):,} seeds x {len(laws)} laws x the overrides' values make "
+            f"{n_worlds:,} worlds: {_too_many(n_worlds)}"
+        )
     runs = _runs(t, n_worlds)
 
     sweep = Sweep(
@@ -384,6 +395,13 @@ def sweep_from_dict(
     )
     _check_scenes(sweep)
     return sweep
+
+
+def _too_many(n: int) -> str:
+    return (
+        f"a sweep runs at most {MAX_WORLDS:,} worlds (its plan and results are held in "
+        "memory); split it into several sweeps, each with its own --out"
+    )
 
 
 def _wrap(read):
@@ -412,6 +430,8 @@ def _seeds(t: Table, scene) -> tuple[int, ...]:
         r = _wrap(lambda: Table(t.source, "[sweep] seeds", v, ("start", "count")))
         start = _wrap(lambda: r.integer("start", 0, minimum=0))
         count = _wrap(lambda: r.integer("count", minimum=1))
+        if count > MAX_WORLDS:
+            raise _error(t, "seeds", f"count = {count:,}: {_too_many(count)}")
         return tuple(range(start, start + count))
     if not isinstance(v, (list, tuple)) or not v:
         raise _error(t, "seeds", f"expected a list or a range, got {type_name(v)}; {fix}")
@@ -1055,6 +1075,11 @@ def run_sweep(
     """
     from .io import RunLock
 
+    if workers is not None and not 0 <= workers <= MAX_WORKERS:
+        raise SweepError(
+            f"workers = {workers}: use 0 (no Dask) to {MAX_WORKERS} local workers, or "
+            "--scheduler for a cluster"
+        )
     out = Path(out)
     (out / BATCH_DIR).mkdir(parents=True, exist_ok=True)
     # One sweep a folder: two would both run the missing worlds and race on the dataset.
@@ -1297,7 +1322,9 @@ def add_options(p) -> None:
     )
     p.add_argument("--metrics", help="metrics to keep, comma-separated (default all)")
     add_cluster_options(p)
-    p.add_argument("--batch-size", type=int, default=None, help="worlds per batch (default: auto)")
+    p.add_argument(
+        "--batch-size", type=_batch_size, default=None, help="worlds per batch (default: auto)"
+    )
     p.add_argument("--runs", help='worlds whose HDF5 run is written: "all", "none" or 0,5,9')
 
 
@@ -1305,11 +1332,31 @@ def add_cluster_options(p) -> None:
     """``--workers`` and ``--scheduler``: where the batches run (sweep and study)."""
     p.add_argument(
         "--workers",
-        type=int,
+        type=_workers,
         default=None,
         help="Dask workers of an embedded local cluster (default: one per core; 0: no Dask)",
     )
     p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
+
+
+def _workers(text: str) -> int:
+    import argparse
+
+    from .cli import _nonnegative_int
+
+    value = _nonnegative_int(text)
+    if value > MAX_WORKERS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: at most {MAX_WORKERS} local workers (a process each); for more, "
+            "start a Dask cluster and give --scheduler"
+        )
+    return value
+
+
+def _batch_size(text: str) -> int:
+    from .cli import _positive_int
+
+    return _positive_int(text)
 
 
 def _seed_option(text: str, scene_seed: int):
@@ -1404,8 +1451,6 @@ def sweep_from_args(args) -> Sweep:
 
 def sweep_command(args) -> int:
     """The body of ``taichi-ice sweep``."""
-    if args.workers is not None and args.workers < 0:
-        raise SweepError(f"--workers {args.workers}: use 0 (no Dask) or more")
     sweep = sweep_from_args(args)
     result = run_sweep(
         sweep,

@@ -402,3 +402,107 @@ def test_resuming_with_another_friction_law_names_the_law(scene, tmp_path):
     with pytest.raises(RunFileError, match="its friction law differs"):
         Simulation(scene, friction=RateState()).run(until=0.08, out=path, resume=True)
     assert read_run(path)["attrs"]["status"] == "complete"
+
+
+# --------------------------------------------------------------------------------------------
+# Limits (item 7): refused in one line before anything is built, compiled or written
+# --------------------------------------------------------------------------------------------
+
+BIG_FIELD = """
+[simulation]
+duration = 1.0
+[ice]
+density = 920.0
+thickness = 0.3
+contact_stiffness = 9.75e7
+contact_viscosity = 3.16e4
+[friction]
+law = "coulomb"
+mu = 0.5
+[[field]]
+shape = "diamond"
+width = 0.7
+length = 1.0
+rows = 1000
+columns = 1000
+origin = [0.0, 0.0]
+spacing = [0.8, 1.05]
+"""
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["run", TWO_SQUARES, "--slots", "-3"], "use 1 to 64 contact slots"),
+        (["run", TWO_SQUARES, "--slots", "0"], "use 1 to 64 contact slots"),
+        (["run", TWO_SQUARES, "--slots", "1000000000"], "use 1 to 64 contact slots"),
+        (["study", "--workers", "-2"], "0 or more"),
+        (["sweep", "--scene", "two_squares", "--seeds", "4", "--workers", "5000"], "--scheduler"),
+        (["sweep", "--scene", "two_squares", "--seeds", "4", "--batch-size", "0"], "1 or more"),
+    ],
+    ids=["slots -3", "slots 0", "slots 1e9", "study workers -2", "workers 5000", "batch 0"],
+)
+def test_counts_out_of_range_are_refused_by_the_command_line(argv, words, tmp_path, capsys):
+    """--slots -3 used to compile and then fail; 1e9 reached Taichi's allocator (a 40 GB
+    request and a traceback); study --workers -2 hung."""
+    with pytest.raises(SystemExit) as exit_:
+        main([*argv, "--out", str(tmp_path / "o")])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and words in err.strip().splitlines()[-1]
+    assert not (tmp_path / "o").exists()
+
+
+def test_slots_out_of_range_are_refused_by_the_api(scene):
+    from taichi_ice.errors import UsageError
+
+    for slots in (0, -3, 10**9, 2.5):
+        with pytest.raises(UsageError, match="slots"):
+            Simulation(scene, slots=slots)
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["bench", "--sizes", "1e12", "--no-box2d"], "32-bit integers"),
+        (["ensemble", TWO_SQUARES, "--seeds", "10000000000"], "fewer --seeds"),
+        (["sweep", "--scene", "two_squares", "--seeds", "100000000"], "at most 1,000,000 worlds"),
+    ],
+    ids=["bench 1e12", "ensemble 1e10 seeds", "sweep 1e8 seeds"],
+)
+def test_work_too_large_for_the_machine_is_refused_before_it_starts(argv, words, tmp_path, capsys):
+    """bench --sizes 1e12 was a traceback in each worker; an ensemble of 1e7 seeds grew the
+    process silently; a sweep of 1e8 seeds ended in a MemoryError. Refused in one line,
+    nothing made."""
+    out = tmp_path / "o"
+    quiet = [] if argv[0] == "bench" else ["--quiet"]
+    assert main([*argv, "--out", str(out), *quiet]) == 2
+    assert words in one_line(capsys.readouterr().err)
+    assert not out.exists()
+
+
+def test_the_memory_guard_reads_the_jobs_address_space_limit(tmp_path):
+    """Under ``ulimit -v`` (3 GB) a field of 1e6 blocks (about 4 GB) is refused in one line
+    naming the limit. It used to be judged against the machine's free memory and crash in
+    Taichi after a minute."""
+    import resource
+    import subprocess
+    import sys
+
+    scene = tmp_path / "big.toml"
+    scene.write_text(BIG_FIELD)
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+
+    proc = subprocess.run(
+        [sys.executable, "-m", "taichi_ice", "run", str(scene), "--out", str(tmp_path / "b.h5")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        preexec_fn=limit,
+    )
+    assert proc.returncode == 2
+    line = one_line(proc.stderr)
+    assert "ulimit -v" in line and "1,000,000 bodies" in line and str(scene) in line
+    assert not (tmp_path / "b.h5").exists()

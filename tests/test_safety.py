@@ -305,14 +305,16 @@ def test_extreme_values_are_one_clear_error(change, error, words):
 
 
 def test_a_scene_too_large_for_the_memory_is_refused_before_it_is_built(monkeypatch):
-    monkeypatch.setattr("taichi_ice.limits.available_memory", lambda: 10**9)
+    monkeypatch.setattr(
+        "taichi_ice.limits.memory_limit", lambda: (10**9, "this machine has available")
+    )
     raw = squares_raw()
     raw["field"] = [
         {"shape": "diamond", "width": 0.7, "length": 1.0, "rows": 1000, "columns": 1000,
          "origin": [10.0, 10.0], "spacing": [0.8, 1.05]}
     ]  # fmt: skip
     start = time.perf_counter()
-    with pytest.raises(SizeError, match=r"need about 4.1 GB .* 1 GB available"):
+    with pytest.raises(SizeError, match=r"need about 4.1 GB .* has available 1 GB"):
         scene_from_dict(raw, source="s.toml")
     assert time.perf_counter() - start < 1.0  # refused from the count, nothing built
 

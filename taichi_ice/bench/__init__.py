@@ -26,6 +26,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from .. import limits
 from ..cli import _nonnegative_int
 from ..errors import TaichiIceError
 from . import box2d, report
@@ -178,7 +179,6 @@ def _check_outputs(out: Path, name: str) -> None:
 
 def bench_command(args: argparse.Namespace) -> int:
     """Run the benchmark that ``args`` (``add_options``) describes; 1 if a size failed."""
-    _check_outputs(Path(args.out), args.name)
     sizes = args.sizes or ([1_000] if args.quick else list(DEFAULT_SIZES))
     steps = args.steps or (QUICK_STEPS if args.quick else DEFAULT_STEPS)
     precisions = list(dict.fromkeys(args.precision))
@@ -187,6 +187,9 @@ def bench_command(args: argparse.Namespace) -> int:
             check_size(args.scene, blocks)
         except ValueError as exc:
             raise TaichiIceError(f"bench --sizes {blocks}: {exc}") from None
+        # Before any worker starts: 1e12 used to fail in each worker with a traceback.
+        limits.check_size(blocks, f"bench --sizes {blocks:g}", "give smaller --sizes")
+    _check_outputs(Path(args.out), args.name)
     box2d_spec = None
     if args.box2d:
         if box2d.version() is None:

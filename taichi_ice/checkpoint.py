@@ -17,12 +17,16 @@ declaration (``taichi_ice.schema``) as fields come and go:
   (rows of each run file written when it was taken, JSON lists), ``scenarios`` and
   ``frictions`` (JSON lists: a resume must be the same run), ``run_ids`` (the ``run_id`` of
   each run file, JSON list: a resume must continue the same files), ``format_version`` and
-  ``written`` (UTC).
+  ``written`` (UTC);
+- ``digest``: SHA-256 of every array and attribute above (``written`` aside). HDF5 keeps no
+  checksum of its data, so a flipped bit in a field would otherwise be restored into the
+  run and carried on silently; a checkpoint whose digest differs is refused.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -32,12 +36,15 @@ import numpy as np
 
 from . import provenance
 from .errors import OutputError, RunFileError
+from .io import _DAMAGE
+from .table import printable
 
-FORMAT_VERSION = "6"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "7"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
 #                       5: a body's rotation (body_rot) instead of its turned outline;
-#                       6: the neighbour lists' gaps and paths (nbr_gap, nbr_path)
+#                       6: the neighbour lists' gaps and paths (nbr_gap, nbr_path);
+#                       7: a digest of everything in it (damage is refused, not restored)
 SUFFIX = ".ckpt"
 
 
@@ -111,6 +118,24 @@ def _write(sim, tmp: Path, arrays: dict, run_ids, n_samples, n_frames) -> None:
         f.attrs["n_frames"] = json.dumps([int(n) for n in n_frames])
         if run_ids is not None:
             f.attrs["run_ids"] = json.dumps([str(r) for r in run_ids])
+        groups = {**arrays, "host": {"initial_energy": np.asarray(sim.initial_energy)}}
+        f.attrs["digest"] = digest(groups, dict(f.attrs))
+
+
+def digest(groups: dict, attrs: dict) -> str:
+    """SHA-256 of a checkpoint's arrays (``{group: {name: array}}``: names, dtypes, shapes
+    and bytes) and attributes (but ``written`` and ``digest``), in a fixed order."""
+    h = hashlib.sha256()
+    for group in sorted(groups):
+        for name in sorted(groups[group]):
+            a = np.ascontiguousarray(groups[group][name])
+            h.update(f"{group}/{name}:{a.dtype.str}:{a.shape}".encode())
+            h.update(a.tobytes())
+    for key in sorted(attrs):
+        if key not in ("written", "digest"):
+            value = attrs[key]
+            h.update(f"{key}={value.decode() if isinstance(value, bytes) else value}".encode())
+    return h.hexdigest()
 
 
 def read(path: str | Path) -> dict:
@@ -134,8 +159,20 @@ def read(path: str | Path) -> dict:
             }
             for group in ("data", "nbr", "host"):
                 out[group] = {name: ds[()] for name, ds in f[group].items()}
-    except (OSError, KeyError) as exc:
-        raise RunFileError(f"{path}: not a taichi-ice checkpoint ({exc})") from None
+    except _DAMAGE as exc:
+        reason = printable(str(exc).strip().splitlines()[0] if str(exc).strip() else exc)
+        raise RunFileError(
+            f"{path}: not a taichi-ice checkpoint, or a damaged one ({reason}); start anew "
+            "with --overwrite"
+        ) from None
+    if str(out["attrs"].get("format_version")) == FORMAT_VERSION:
+        groups = {g: out[g] for g in ("data", "nbr", "host")}
+        if out["attrs"].get("digest") != digest(groups, out["attrs"]):
+            raise RunFileError(
+                f"{path}: a damaged checkpoint (its contents do not match the digest written "
+                "with them); start anew with --overwrite"
+            )
+    # (Another format is refused by ``restore``, naming the versions.)
     for key in ("scenarios", "frictions", "n_samples", "n_frames", "run_ids"):
         if key == "run_ids" and key not in out["attrs"]:
             continue  # written before run ids: the rows are still checked

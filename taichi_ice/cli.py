@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ._version import __version__
 from .errors import Interrupted, TaichiIceError
+from .table import printable
 
 EXAMPLES = {
     "run": """examples:
@@ -512,7 +513,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"taichi-ice: {exc} (files written so far are kept)", file=sys.stderr)
         return 143 if "SIGTERM" in str(exc) else 130
     except TaichiIceError as exc:
-        print(f"taichi-ice: error: {exc}", file=sys.stderr)
+        # One line whatever the message quotes (a key or a name with a newline in it).
+        print(f"taichi-ice: error: {printable(exc)}", file=sys.stderr)
         return 2
     except FileNotFoundError as exc:
         print(f"taichi-ice: error: {exc.filename or exc}: no such file", file=sys.stderr)

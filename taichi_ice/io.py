@@ -656,6 +656,21 @@ def _check_resumable(f: h5py.File, path, run_id: str | None, samples: int, frame
         )
 
 
+# What HDF5 raises on a file whose bytes were damaged (a bit flipped, a block cut): a
+# checksum or an address that does not add up, a name or a type that no longer decodes.
+_DAMAGE = (OSError, RuntimeError, KeyError, ValueError, TypeError, UnicodeDecodeError)
+
+
+def damaged(path, exc: BaseException) -> RunFileError:
+    """The one-line error for a run file HDF5 cannot read whole."""
+    from .table import printable
+
+    reason = printable(str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__)
+    return RunFileError(
+        f"{path}: damaged, HDF5 cannot read it ({reason}); run it again, or use a copy"
+    )
+
+
 def _check_run_file(f: h5py.File, path) -> None:
     missing = [g for g in ("series", "frames", "bodies") if g not in f]
     if missing or "status" not in f.attrs:
@@ -689,7 +704,10 @@ def open_file(path: str | Path):
                 raise RunFileError(f"{p}: cannot be read ({exc})") from None
             _time.sleep(_READ_PAUSE)
     try:
-        _check_run_file(f, p)
+        try:
+            _check_run_file(f, p)
+        except _DAMAGE as exc:
+            raise damaged(p, exc) from None
         yield f
     finally:
         f.close()
@@ -702,14 +720,19 @@ def read_run(path: str | Path) -> dict:
     """
     out: dict = {}
     with open_file(path) as f:
-        out["attrs"] = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
-        for group in ("series", "frames", "bodies"):
-            out[group] = {}
-            for name, ds in f[group].items():
-                data = ds[()]
-                if ds.dtype.kind == "O":
-                    data = np.array([x.decode() if isinstance(x, bytes) else x for x in data])
-                out[group][name] = data
+        try:
+            out["attrs"] = {
+                k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()
+            }
+            for group in ("series", "frames", "bodies"):
+                out[group] = {}
+                for name, ds in f[group].items():
+                    data = ds[()]
+                    if ds.dtype.kind == "O":
+                        data = np.array([x.decode() if isinstance(x, bytes) else x for x in data])
+                    out[group][name] = data
+        except _DAMAGE as exc:
+            raise damaged(path, exc) from None
     return out
 
 

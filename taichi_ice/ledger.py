@@ -25,8 +25,9 @@ from typing import Any
 
 from ._version import __version__
 from .errors import OutputError
+from .table import printable
 
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"  # 2: a digest of the record (a damaged ledger is refused)
 
 
 def scene_digest(scene) -> str:
@@ -42,6 +43,13 @@ def _plain(value: Any) -> Any:
 def _short(value: Any, width: int = 60) -> str:
     text = json.dumps(value)
     return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def record_digest(record: Mapping[str, Any]) -> str:
+    """SHA-256 of a JSON record without its ``digest``: a byte damaged on disk that still
+    parses (a status, a step count) changes it, and the record is refused, not believed."""
+    rest = {k: v for k, v in record.items() if k != "digest"}
+    return hashlib.sha256(json.dumps(rest, sort_keys=True, allow_nan=True).encode()).hexdigest()
 
 
 class Ledger:
@@ -137,9 +145,14 @@ class Ledger:
                 raise KeyError(", ".join(sorted(missing)))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise OutputError(
-                f"{self.path}: not a {self.command} ledger this version reads ({exc}); start "
-                "anew with --overwrite"
+                f"{self.path}: not a {self.command} ledger this version reads "
+                f"({printable(exc)}); start anew with --overwrite"
             ) from None
+        if old.get("digest") != record_digest(old):
+            raise OutputError(
+                f"{self.path}: a damaged ledger (its contents do not match the digest written "
+                "with them); start anew with --overwrite"
+            )
         return old
 
     def _check(self, old: Mapping[str, Any]) -> None:
@@ -166,6 +179,7 @@ class Ledger:
             "checkpoint_every": self.checkpoint_every,
             "parts": self.parts,
         }
+        record["digest"] = record_digest(record)
         tmp = self.path.with_name(self.path.name + ".tmp")
         with open(tmp, "w") as fh:
             fh.write(json.dumps(record, indent=1, allow_nan=True) + "\n")
@@ -193,4 +207,4 @@ class Ledger:
         self._save()
 
 
-__all__ = ["FORMAT_VERSION", "Ledger", "scene_digest"]
+__all__ = ["FORMAT_VERSION", "Ledger", "record_digest", "scene_digest"]

@@ -78,6 +78,7 @@ from ._version import __version__
 from .codes import ThetaMethod
 from .ensemble import METRICS
 from .errors import Interrupted, OutputError, ScenarioError, TaichiIceError
+from .ledger import record_digest
 from .table import Table, check_keys, is_number, type_name
 
 __all__ = [
@@ -989,9 +990,10 @@ def load_done(out: Path, identity: dict) -> dict[str, dict]:
         old = _read_json(state)
         if not isinstance(old, dict):
             raise SweepError(
-                f"{state}: damaged (not the JSON object a sweep writes), so this folder's "
-                "settings cannot be checked; give another --out, or delete the folder (or this "
-                "file, if you are sure the folder holds this sweep) to start again"
+                f"{state}: damaged (not the JSON a sweep writes, or not matching its digest), so "
+                "this folder's settings cannot be checked; give another --out, or delete the "
+                "folder (or this file, if you are sure the folder holds this sweep) to start "
+                "again"
             )
         diff = [k for k in identity if old.get(k) != identity[k]]
         if diff:
@@ -1025,16 +1027,25 @@ def load_done(out: Path, identity: dict) -> dict[str, dict]:
 
 
 def _read_json(path: Path) -> Any:
-    """The JSON in ``path``, or None if it is not JSON (truncated, empty, garbled)."""
+    """The JSON in ``path``, or None if it is not JSON (truncated, empty, garbled) or is a
+    table whose ``digest`` does not match it (a byte damaged that still parses: a metric's
+    digit, a status). Tables written before digests have none and are read as they are."""
     try:
-        return json.loads(path.read_bytes().decode("utf-8"))
+        data = json.loads(path.read_bytes().decode("utf-8"))
     except (ValueError, UnicodeDecodeError):
         return None
+    if isinstance(data, dict) and "digest" in data:
+        if data.pop("digest") != record_digest(data):
+            return None
+    return data
 
 
 def _write_json(path: Path, data: Any) -> None:
     """Write ``data`` whole or not at all (a kill mid-write leaves no half file; fsync
-    before the rename, so that a power cut does not leave an empty file in its place)."""
+    before the rename, so that a power cut does not leave an empty file in its place); a
+    table carries the digest ``_read_json`` checks."""
+    if isinstance(data, dict):
+        data = {**data, "digest": record_digest(data)}
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w") as fh:
         fh.write(json.dumps(data, indent=1, allow_nan=True) + "\n")

@@ -58,12 +58,21 @@ def _suggest(key: str, known: Sequence[str]) -> str:
     return f"{hint}known keys: {', '.join(known)}"
 
 
+def printable(text: Any) -> str:
+    """``text`` with each character that does not print (a newline, a NUL, a control
+    character) written as its escape, so that a message that quotes it stays one line."""
+    text = str(text)
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def check_keys(source: str, label: str, data: Mapping, known: Sequence[str], what="key") -> None:
     """Refuse the first key of ``data`` not in ``known``, suggesting the closest known one."""
     for key in data:
         if key not in known:
             raise ScenarioError(
-                f"{source}: {label}: unknown {what} '{key}'; {_suggest(key, known)}"
+                f"{source}: {label}: unknown {what} '{printable(key)}'; {_suggest(key, known)}"
             )
 
 
@@ -79,7 +88,7 @@ class Table:
 
     def error(self, key: str, message: str) -> ScenarioError:
         """The error for ``key``, its message prefixed with the file, the table and the key."""
-        return ScenarioError(f"{self.source}: {self.label}, key '{key}': {message}")
+        return ScenarioError(f"{self.source}: {self.label}, key '{printable(key)}': {message}")
 
     def __contains__(self, key: str) -> bool:
         return key in self.data

@@ -128,9 +128,31 @@ def test_resume_refuses_a_checkpoint_that_counts_more_rows_than_the_file_holds(s
     shutil.copyfile(saved, ckpt.path_for(path))
     with h5py.File(ckpt.path_for(path), "a") as f:
         del f.attrs["run_ids"]
+        resign(f)  # a whole checkpoint, only without ids: the rows must catch it
     with pytest.raises(RunFileError, match="fewer than"):
         run(scene, path, 0.1, resume=True)
     assert read_run(path)["attrs"]["status"] == "complete"
+
+
+def resign(f: h5py.File) -> None:
+    """Write the digest of a checkpoint changed on purpose (as its writer would have)."""
+    groups = {g: {n: ds[()] for n, ds in f[g].items()} for g in ("data", "nbr", "host")}
+    f.attrs["digest"] = ckpt.digest(groups, dict(f.attrs))
+
+
+def test_a_checkpoint_whose_data_were_damaged_is_refused_not_restored(scene, tmp_path):
+    """HDF5 keeps no checksum of its data: one flipped bit in a saved velocity used to be
+    restored and run on, silently. The digest written with the checkpoint refuses it."""
+    path = tmp_path / "v.h5"
+    run(scene, path, 0.04, checkpoint_every=0)
+    with h5py.File(ckpt.path_for(path), "a") as f:
+        vel = f["data/body_vel"][()]
+        vel.reshape(-1).view(np.uint8)[3] ^= 0x10  # a low bit of the first velocity
+        f["data/body_vel"][...] = vel
+    before = read_run(path)
+    with pytest.raises(RunFileError, match=r"damaged checkpoint .* digest"):
+        run(scene, path, 0.08, resume=True)
+    np.testing.assert_array_equal(read_run(path)["series"]["time"], before["series"]["time"])
 
 
 def test_a_checkpoint_with_a_damaged_attribute_is_one_clear_error(scene, tmp_path):
@@ -506,3 +528,25 @@ def test_the_memory_guard_reads_the_jobs_address_space_limit(tmp_path):
     line = one_line(proc.stderr)
     assert "ulimit -v" in line and "1,000,000 bodies" in line and str(scene) in line
     assert not (tmp_path / "b.h5").exists()
+
+
+def test_a_ledger_damaged_so_that_it_still_parses_is_refused(tmp_path, capsys, taichi_runtime):
+    """A byte of ``ensemble-state.json`` changed inside a status ("comp&ete") used to be
+    believed: the resume reported the finished part FAILED and exited 1. The ledger's digest
+    refuses it in one line, and the run files stay as they were."""
+    arch, precision = taichi_runtime
+    out = tmp_path / "ens"
+    argv = ["ensemble", TWO_SQUARES, "--seeds", "2", "--until", "0.02", "--out", str(out)]
+    opts = ["--quiet", "--arch", arch, "--precision", precision]
+    assert main([*argv, *opts]) == 0
+    ledger = out / "ensemble-state.json"
+    text = ledger.read_text()
+    assert '"complete"' in text
+    ledger.write_text(text.replace('"complete"', '"comp&ete"', 1))
+    runs = sorted(out.rglob("*.h5"))
+    before = [read_run(p)["series"]["time"] for p in runs]
+    capsys.readouterr()
+    assert main([*argv, "--resume", *opts]) == 2
+    assert "damaged ledger" in one_line(capsys.readouterr().err)
+    for p, time in zip(runs, before):
+        np.testing.assert_array_equal(read_run(p)["series"]["time"], time)

@@ -350,6 +350,19 @@ def test_a_damaged_batch_file_is_set_aside_and_its_worlds_run_again(sweep_dir, c
     assert damaged.with_name(damaged.name + ".damaged").exists()
     _equal(open_sweep(again.path), expected, [*sweep.metrics, "steps", "dt", "seed", "mu"])
 
+    # Damage that still parses: one value changed (as a flipped bit in a digit would), the
+    # digest left as written. It used to be read as a result; now it is set aside and rerun.
+    other = batches[1]
+    data = json.loads(other.read_text())
+    assert "digest" in data
+    data["wall_time"] = data["wall_time"] + 1.0
+    other.write_text(json.dumps(data))
+    capsys.readouterr()
+    third = run_sweep(sweep, out, workers=0, progress=False)
+    assert str(other) in capsys.readouterr().err
+    assert len(third.ran) == 4 and not third.failed_batches
+    _equal(open_sweep(third.path), expected, [*sweep.metrics, "steps", "dt", "seed", "mu"])
+
     (out / "sweep-state.json").write_text("{")
     with pytest.raises(SweepError, match=r"sweep-state\.json: damaged"):
         run_sweep(sweep, out, workers=0, progress=False)

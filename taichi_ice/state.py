@@ -45,6 +45,10 @@ def make_field(v: Var, layout: Layout):
     return ti.field(dtype, shape=shape)
 
 
+def _scalar_bytes(v: Var, layout: Layout) -> int:
+    return 8 if ti_dtype(v, layout) in (ti.f64, ti.i64) else 4
+
+
 class Fields:
     """A group of declared fields as attributes (``fields.body_pos``).
 
@@ -56,9 +60,23 @@ class Fields:
 
     def __init__(self, layout: Layout, decls: Iterable[Var]):
         self.layout = layout
+        decls = tuple(decls)
         self.names = tuple(v.name for v in decls)
-        for v in decls:
-            setattr(self, v.name, make_field(v, layout))
+        # Taichi 1.7's SPIR-V backend (Vulkan, Metal) lays out a tree of fields wrongly
+        # when a 32-bit field's size is not a multiple of 8 bytes in a tree that holds
+        # 64-bit fields: the two overlap (measured on Mesa's lavapipe: [i64 (2,), f32 (3,)]
+        # and [f32 (3,), f64 (2,)] each lose values to the other, [i64 (2,), f32 (2,)] and
+        # [i64 (2,), i32 (), f32 ()] do not). In a World 4 of 33 fields lost values: a
+        # contact was missed for a step, and pushed_field never met its pusher. So the
+        # 64-bit fields come first, and a 32-bit field of an odd number of elements is
+        # followed by a 4-byte pad. The CPU and CUDA compute the same either way.
+        self._pads = []
+        for v in sorted(decls, key=lambda v: -_scalar_bytes(v, layout)):
+            field = make_field(v, layout)
+            setattr(self, v.name, field)
+            size = int(np.prod(schema.allocated_shape(layout, v), dtype=np.int64)) * v.lanes
+            if _scalar_bytes(v, layout) == 4 and size % 2:
+                self._pads.append(ti.field(ti.i32, shape=()))
         for v in decls:
             if v.init not in (0, schema.HOST):
                 getattr(self, v.name).fill(v.init)

@@ -68,6 +68,28 @@ def actual_arch() -> str | None:
     return _actual
 
 
+# Backends whose shading language has no float64 exp, log, sin or cos (SPIR-V's
+# GLSL.std.450, Metal's): the kernels take fdlibm's (``fmath``, ``geometry.rotation_ti``).
+SPIRV_ARCHES = ("vulkan", "metal", "opengl", "gles", "dx11")
+
+
+def portable_f64() -> bool:
+    """Whether the running Taichi computes in float64 on a backend without float64 exp,
+    log, sin and cos (Vulkan, Metal): read when a kernel compiles (``ti.static``)."""
+    return _current is not None and _current[1] == "f64" and _actual in SPIRV_ARCHES
+
+
+def resolve(arch: str | None = None, precision: str | None = None) -> tuple[str, str]:
+    """``(arch, precision)`` with None read as what this process's Taichi already runs on,
+    or ``"cpu"`` and ``"f64"`` before it started: a Simulation or a command run inside a
+    process that started Taichi on a GPU (a notebook, the GPU test lane) uses that GPU."""
+    if arch is None:
+        arch = _current[0] if _current is not None else "cpu"
+    if precision is None:
+        precision = _current[1] if _current is not None else "f64"
+    return arch, precision
+
+
 def cpu_threads() -> int:
     """The CPU threads Taichi runs its parallel loops on (every core unless told; the
     machine's count before ``init``)."""

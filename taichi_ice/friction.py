@@ -48,6 +48,7 @@ import taichi as ti
 
 from .codes import RestRule, ThetaMethod
 from .errors import StabilityError
+from .fmath import exp_any, log_any
 
 __all__ = [
     "EULER_STABILITY_LIMIT",
@@ -90,7 +91,7 @@ RK4_STABILITY_LIMIT = 2.785293563405282
 @ti.func
 def slip_log_ti(v, v_star):
     """Taichi twin of :func:`slip_log`."""
-    return ti.log(ti.max(v, v_star) / v_star)
+    return log_any(ti.max(v, v_star) / v_star)
 
 
 @ti.func
@@ -112,7 +113,7 @@ def theta_step_ti(theta, x_start, x_mid, x_end, dt, B, t_c, method: ti.template(
     new = theta
     if ti.static(method == ThetaMethod.EXPONENTIAL):
         steady = -B * x_mid
-        new = steady + (theta - steady) * ti.exp(-h)
+        new = steady + (theta - steady) * exp_any(-h)
     if ti.static(method == ThetaMethod.EULER):
         new = theta - h * (theta + B * x_start)
     if ti.static(method == ThetaMethod.IMPLICIT):

@@ -11,6 +11,7 @@ from typing import NamedTuple
 import numpy as np
 import taichi as ti
 
+from . import backend
 from .codes import OverlapKind
 from .errors import PolygonError
 
@@ -167,9 +168,11 @@ _COS = (
     -1.13596475577881948265e-11,
 )
 ROTATION_REDUCED_MAX = 1.0e6
+_TWO_PI = 6.28318530717958647693e00
+_INV_TWO_PI = 1.59154943091895335769e-01
 
 
-def rotation(angle):
+def rotation(angle, portable: bool = False):
     """``(cos(angle), sin(angle))`` by fdlibm's method (see above), as float64 arrays.
 
     The NumPy twin of :func:`rotation_ti`, step for step, so the two agree bit for bit; both
@@ -177,8 +180,15 @@ def rotation(angle):
 
     Args:
         angle: angle(s) in rad, any shape.
+        portable: as on a backend without float64 cos and sin (Vulkan, Metal): an angle
+            beyond ``ROTATION_REDUCED_MAX`` is brought within a turn of 0 (losing what its
+            own round-off holds, ~1e-16 of it) instead of handed to libm.
     """
     x = np.asarray(angle, dtype=np.float64)
+    if portable:
+        with np.errstate(invalid="ignore"):
+            far = ~(np.abs(x) <= ROTATION_REDUCED_MAX)
+        x = np.where(far, x - _TWO_PI * np.floor(x * _INV_TWO_PI + 0.5), x)
     k = np.floor(x * _TWO_OVER_PI + 0.5)
     r = ((x - k * _PIO2_1) - k * _PIO2_2) - k * _PIO2_3
     z = r * r
@@ -193,7 +203,7 @@ def rotation(angle):
     c = np.select([quadrant == 0, quadrant == 1, quadrant == 2], [cos_r, -sin_r, -cos_r], sin_r)
     s = np.select([quadrant == 0, quadrant == 1, quadrant == 2], [sin_r, cos_r, -sin_r], -cos_r)
     far = ~(np.abs(x) <= ROTATION_REDUCED_MAX)
-    if np.any(far):
+    if not portable and np.any(far):
         c = np.where(far, np.cos(x), c)
         s = np.where(far, np.sin(x), s)
     return c, s
@@ -205,32 +215,49 @@ def rotation_ti(angle):
 
     For a float64 runtime (``backend.init(precision="f64")``): its constants are literals of
     the default float type, which in a float32 runtime would round them (the float32 step
-    uses ``ti.cos`` and ``ti.sin``, ``integrate.Integrator.turn``).
+    uses ``ti.cos`` and ``ti.sin``, ``integrate.Integrator.turn``). Beyond
+    ``ROTATION_REDUCED_MAX`` libm takes over, except on the backends that have no float64
+    cos and sin (``backend.portable_f64``: Vulkan, Metal), where the angle is first brought
+    within a turn of 0 (``rotation(..., portable=True)``).
     """
+    out = ti.Vector([0.0, 0.0])
+    if ti.static(backend.portable_f64()):
+        x = angle
+        if not ti.abs(x) <= ROTATION_REDUCED_MAX:
+            x = x - _TWO_PI * ti.floor(x * _INV_TWO_PI + 0.5)
+        out = _rotation_reduced_ti(x)
+    else:
+        if ti.abs(angle) <= ROTATION_REDUCED_MAX:
+            out = _rotation_reduced_ti(angle)
+        else:
+            out = ti.Vector([ti.cos(angle), ti.sin(angle)])
+    return out
+
+
+@ti.func
+def _rotation_reduced_ti(angle):
+    """fdlibm's cos and sin of an angle within ``ROTATION_REDUCED_MAX`` of 0."""
+    k = ti.floor(angle * _TWO_OVER_PI + 0.5)
+    r = ((angle - k * _PIO2_1) - k * _PIO2_2) - k * _PIO2_3
+    z = r * r
+    s1, s2, s3, s4, s5, s6 = ti.static(_SIN)
+    c1, c2, c3, c4, c5, c6 = ti.static(_COS)
+    sin_r = r + r * z * (s1 + z * (s2 + z * (s3 + z * (s4 + z * (s5 + z * s6)))))
+    tail = z * z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * c6)))))
+    hz = 0.5 * z
+    w = 1.0 - hz
+    cos_r = w + (((1.0 - w) - hz) + tail)
+    quadrant = ti.cast(k, ti.i64) & 3
     c = 0.0
     s = 0.0
-    if ti.abs(angle) <= ROTATION_REDUCED_MAX:
-        k = ti.floor(angle * _TWO_OVER_PI + 0.5)
-        r = ((angle - k * _PIO2_1) - k * _PIO2_2) - k * _PIO2_3
-        z = r * r
-        s1, s2, s3, s4, s5, s6 = ti.static(_SIN)
-        c1, c2, c3, c4, c5, c6 = ti.static(_COS)
-        sin_r = r + r * z * (s1 + z * (s2 + z * (s3 + z * (s4 + z * (s5 + z * s6)))))
-        tail = z * z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * c6)))))
-        hz = 0.5 * z
-        w = 1.0 - hz
-        cos_r = w + (((1.0 - w) - hz) + tail)
-        quadrant = ti.cast(k, ti.i64) & 3
-        if quadrant == 0:
-            c, s = cos_r, sin_r
-        elif quadrant == 1:
-            c, s = -sin_r, cos_r
-        elif quadrant == 2:
-            c, s = -cos_r, -sin_r
-        else:
-            c, s = sin_r, -cos_r
+    if quadrant == 0:
+        c, s = cos_r, sin_r
+    elif quadrant == 1:
+        c, s = -sin_r, cos_r
+    elif quadrant == 2:
+        c, s = -cos_r, -sin_r
     else:
-        c, s = ti.cos(angle), ti.sin(angle)
+        c, s = sin_r, -cos_r
     return ti.Vector([c, s])
 
 

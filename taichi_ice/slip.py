@@ -69,6 +69,7 @@ import math
 import taichi as ti
 
 from .codes import RestRule
+from .fmath import exp_any, log_any
 from .friction import theta_step, theta_step_ti
 
 # theta of a contact with no sliding interface: one that touched last step and stuck (or whose
@@ -229,16 +230,16 @@ def contact_friction_ti(
     if speed <= v_star or K * v_star + f_n * ti.max(c0, 0.0) - f_trial >= 0.0:
         v = ti.min(ti.max(f_trial - mu_low * f_n, 0.0) / K, speed)
     else:
-        y_s = ti.log(speed / v_star)
+        y_s = log_any(speed / v_star)
         y = y_s
         capped = K * speed + f_n * ti.max(c0 + c1 * y_s, 0.0) - f_trial <= 0.0
         if not capped:
             mu_min = 0.0
             if c1 >= 0.0:
                 mu_min = ti.max(c0, 0.0)
-            y = ti.min(ti.log((f_trial - f_n * mu_min) / (K * v_star)), y_s)
+            y = ti.min(log_any((f_trial - f_n * mu_min) / (K * v_star)), y_s)
             for _ in range(NEWTON_ITERATIONS):
-                e = K * v_star * ti.exp(y)
+                e = K * v_star * exp_any(y)
                 m = c0 + c1 * y
                 g = e + f_n * ti.max(m, 0.0) - f_trial
                 gp = e
@@ -254,7 +255,7 @@ def contact_friction_ti(
         mu = ti.max(mu0 + theta_new + A * y, 0.0)
         v = speed
         if not capped:
-            v = v_star * ti.exp(y)
+            v = v_star * exp_any(y)
     if slip < 0.0:
         v = -v
     return mu, theta_new, v

@@ -295,8 +295,15 @@ def _positive_int(text: str) -> int:
 
 def _engine_options(p: argparse.ArgumentParser) -> None:
     """The options every command that runs scenes shares: arch, precision, end, progress."""
-    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
-    p.add_argument("--precision", default="f64", choices=["f64", "f32"])
+    p.add_argument(
+        "--arch",
+        default=None,
+        choices=["cpu", "gpu", "cuda", "vulkan", "metal"],
+        help="where the kernels run (default cpu; gpu: what Taichi finds)",
+    )
+    p.add_argument(
+        "--precision", default=None, choices=["f64", "f32"], help="float type (default f64)"
+    )
     p.add_argument(
         "--until", type=_positive_float, default=None, help="end time, s (default: duration)"
     )
@@ -504,10 +511,16 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:  # not the main thread (a test's, an embedding's): leave it
         pass
     try:
-        if getattr(args, "arch", "cpu") not in ("cpu", None):
-            from .backend import probe
+        if hasattr(args, "arch") and hasattr(args, "precision"):
+            from . import backend
 
-            probe(args.arch)  # in a child process: a GPU that crashes ti.init stays there
+            # Unset: cpu and f64, or what Taichi already runs on when main is called in a
+            # process that started it (a notebook, the GPU test lane).
+            args.arch, args.precision = backend.resolve(args.arch, args.precision)
+            running = backend.current()
+            if args.arch != "cpu" and (running is None or running[0] != args.arch):
+                # In a child process: a GPU that crashes ti.init stays there.
+                backend.probe(args.arch)
         return int(args.func(args) or 0)
     except Interrupted as exc:
         print(f"taichi-ice: {exc} (files written so far are kept)", file=sys.stderr)

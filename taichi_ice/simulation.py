@@ -132,7 +132,9 @@ class Simulation:
         scene: a Scene, a scene file's path, or a sequence of Scenes run together as
             independent worlds.
         friction: a ``Coulomb`` or ``RateState`` law that replaces the scenes' own.
-        arch: 'cpu' or 'gpu'. precision: 'f64' or 'f32'.
+        arch: 'cpu' or 'gpu' (or a backend by name); None: the arch Taichi already runs on
+            in this process, else 'cpu'. precision: 'f64' or 'f32'; None: the running one,
+            else 'f64'.
         dt: time step (s) overriding the scenes' (still refused above the stability limit
             unless ``force_dt``).
         slots: contact slots per body (default sized from the scene).
@@ -147,8 +149,8 @@ class Simulation:
         self,
         scene,
         friction=None,
-        arch: str = "cpu",
-        precision: str = "f64",
+        arch: str | None = None,
+        precision: str | None = None,
         dt: float | None = None,
         force_dt: bool = False,
         slots: int | None = None,
@@ -180,6 +182,7 @@ class Simulation:
         if friction is not None:
             scenes = [s.with_friction(friction) for s in scenes]
         self.scenes = scenes
+        arch, precision = backend.resolve(arch, precision)
         self.arch, self.precision = arch, precision
         first = scenes[0].simulation
         if dt is not None:

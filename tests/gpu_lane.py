@@ -1,0 +1,115 @@
+"""The GPU lane: the tests that cover every kernel, run on a GPU backend in both precisions.
+
+    python tests/gpu_lane.py --check          # exit 0 if a Vulkan device answers, else 1
+    python tests/gpu_lane.py --run vulkan     # the lane on Vulkan (make test-vulkan)
+    python tests/gpu_lane.py --run cuda       # the same on CUDA, where there is one
+
+Each precision runs in its own pytest process (Taichi holds one runtime per process) with
+``--arch`` and ``--precision`` (tests/conftest.py), and a line gives its pass count and time.
+On Vulkan without a GPU (Mesa's lavapipe) the kernels run on the CPU through SPIR-V, slowly
+but by the GPU code paths: a kernel per stage and step, and a thread per world.
+
+What the lane holds and why (the CPU suite runs all of it too):
+
+- ``test_gpu.py``: worlds on the lane's arch against the same worlds on the CPU (a child
+  process), a batch against each world alone, and the two ways of stepping;
+- ``test_fmath.py``: the float64 exp and log that SPIR-V lacks;
+- ``test_geometry.py``, ``test_contact.py``: the overlap and contact kernels against their
+  NumPy twins and shapely;
+- ``test_friction.py``, ``test_slip.py``: the laws' kernels against their twins and closed
+  forms;
+- ``test_engine.py``, ``test_budget.py``: stepping, conservation, the energy budget;
+- ``test_resume.py`` (float64): checkpoints and resume, bit for bit on the same arch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+LANE = {
+    "f64": [
+        "tests/test_gpu.py",
+        "tests/test_fmath.py",
+        "tests/test_geometry.py",
+        "tests/test_contact.py",
+        "tests/test_friction.py",
+        "tests/test_slip.py",
+        "tests/test_engine.py",
+        "tests/test_budget.py",
+        "tests/test_resume.py",
+    ],
+    "f32": [
+        "tests/test_gpu.py",
+        "tests/test_contact.py",
+        "tests/test_friction.py",
+        "tests/test_engine.py",
+    ],
+}
+
+
+def device_answers(arch: str) -> bool:
+    """Whether Taichi starts on ``arch`` here (in a child process, so a crash of the driver
+    does not touch this one)."""
+    from taichi_ice.backend import probe
+    from taichi_ice.errors import BackendError
+
+    try:
+        probe(arch)
+    except BackendError:
+        return False
+    return True
+
+
+def run_lane(arch: str, extra: list[str]) -> int:
+    failed = 0
+    for precision, files in LANE.items():
+        start = time.perf_counter()
+        cmd = [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "--arch",
+            arch,
+            "--precision",
+            precision,
+            *files,
+            *extra,
+        ]
+        proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
+        summary = [ln for ln in proc.stdout.splitlines() if " in " in ln and "passed" in ln]
+        took = time.perf_counter() - start
+        if proc.returncode != 0:
+            sys.stdout.write(proc.stdout[-20000:])
+            sys.stderr.write(proc.stderr[-5000:])
+            failed += 1
+        line = summary[-1].strip("= ") if summary else f"exit {proc.returncode}"
+        print(f"{arch} lane, {precision}: {line} ({took:.0f} s in all)", flush=True)
+    return 1 if failed else 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    group = ap.add_mutually_exclusive_group(required=True)
+    group.add_argument("--check", action="store_true", help="exit 0 if Vulkan answers")
+    group.add_argument("--run", metavar="ARCH", help="run the lane on ARCH (vulkan, cuda)")
+    args, extra = ap.parse_known_args(argv)
+    sys.path.insert(0, str(ROOT))
+    if args.check:
+        return 0 if device_answers("vulkan") else 1
+    if not device_answers(args.run):
+        print(f"{args.run} lane: Taichi finds no {args.run} device here", file=sys.stderr)
+        return 1
+    return run_lane(args.run, extra)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,168 @@
+"""The same worlds on a GPU backend as on the CPU (issue 28).
+
+These tests compare the session's arch (``--arch vulkan``, ``--arch cuda``: the GPU lane,
+``tests/gpu_lane.py``) against the CPU, which runs in a child process with the same
+precision: every bundled scene with its own law and with the other, its trajectories and
+its energy budget; a batch of layouts against each layout run alone; the thread-per-world
+and kernel-per-stage steppings. On a CPU session they compare the CPU with itself and are
+skipped (``test_engine.py`` holds the two steppings against each other there).
+
+Where the two must agree and why:
+
+- float32 and float64 Coulomb: the same operations in the same order on IEEE floats, so bit
+  for bit where the backend's compiler neither fuses a multiply and an add nor reorders
+  (Taichi asks for neither, ``fast_math=False``); the comparisons use a tolerance of a few
+  ulps of the quantity (``RTOL``), and the bit-for-bit fraction is printed;
+- rate-and-state in float64: Vulkan and Metal take fdlibm's exp and log (``fmath``), the
+  CPU its libm's; the two differ by up to an ulp, which a contact's friction carries into
+  its trajectory. Over these short runs that stays below ``RS_RTOL``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from taichi_ice import Simulation, load_scenario
+from taichi_ice.friction import Coulomb, RateState
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# (scene, simulated seconds): each past its first contacts. pushed_field: the pusher reaches
+# the field at 2.33 s (its Vulkan run used never to touch it).
+SCENES = {
+    "two_squares": 0.25,
+    "sliding_block": 0.2,
+    "free_field": 0.4,
+    "pushed_field": 2.6,
+    "pillar": 0.6,
+}
+LAWS = {"coulomb": Coulomb(mu=0.5), "rate-state": RateState()}
+RTOL = {"f64": 1e-12, "f32": 1e-5}  # of the quantity's scale (positions: the scene's size)
+RS_RTOL = {"f64": 1e-9, "f32": 1e-5}
+
+CHILD = """
+import json, sys
+import numpy as np
+from taichi_ice import Simulation, backend, load_scenario
+from taichi_ice.friction import Coulomb, RateState
+name, law, until, precision = sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4]
+backend.init("cpu", precision)
+friction = Coulomb(mu=0.5) if law == "coulomb" else RateState()
+sim = Simulation(load_scenario(name), friction=friction, arch="cpu", precision=precision)
+result = sim.run(until=until)
+w = sim.world
+s = result.series[0]
+print(json.dumps({
+    "pos": w.positions().tolist(), "ang": w.angles().tolist(),
+    "vel": w.velocities().tolist(), "steps": int(sim.steps),
+    "series": {k: np.asarray(v, dtype=float).tolist() for k, v in s.items()},
+}))
+"""
+
+
+@pytest.fixture(scope="module")
+def gpu(taichi_runtime):
+    arch, precision = taichi_runtime
+    if arch == "cpu":
+        pytest.skip("compares a GPU backend with the CPU: run in the GPU lane (make test-vulkan)")
+    return arch, precision
+
+
+def on_cpu(name: str, law: str, until: float, precision: str) -> dict:
+    proc = subprocess.run(
+        [sys.executable, "-c", CHILD, name, law, repr(until), precision],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def on_here(name: str, law: str, until: float, arch: str, precision: str) -> dict:
+    sim = Simulation(load_scenario(name), friction=LAWS[law], arch=arch, precision=precision)
+    result = sim.run(until=until)
+    w = sim.world
+    return {
+        "pos": w.positions(),
+        "ang": w.angles(),
+        "vel": w.velocities(),
+        "steps": sim.steps,
+        "series": result.series[0],
+    }
+
+
+@pytest.mark.parametrize("law", sorted(LAWS))
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_a_scene_on_the_gpu_equals_the_cpu(name, law, gpu):
+    arch, precision = gpu
+    until = SCENES[name]
+    want = on_cpu(name, law, until, precision)
+    got = on_here(name, law, until, arch, precision)
+    assert got["steps"] == want["steps"]
+    rtol = (RS_RTOL if law == "rate-state" else RTOL)[precision]
+    pos, want_pos = np.asarray(got["pos"]), np.asarray(want["pos"])
+    scale = max(1.0, float(np.max(np.abs(want_pos))))
+    same = np.mean(pos == want_pos)
+    err = float(np.max(np.abs(pos - want_pos))) / scale
+    print(f"{name} {law} {arch}/{precision}: positions {100 * same:.0f} % bit for bit, "
+          f"largest difference {err:.2e} of the scene's size")  # fmt: skip
+    assert err <= rtol, err
+    np.testing.assert_allclose(got["ang"], want["ang"], rtol=0, atol=rtol * 10)
+    s, t = got["series"], want["series"]
+    came = max(1.0, abs(t["work_in"][-1]) + abs(t["kinetic_energy"][0]))
+    for key in ("kinetic_energy", "friction_energy", "work_in", "elastic_energy"):
+        np.testing.assert_allclose(s[key], t[key], rtol=0, atol=rtol * came * 100, err_msg=key)
+    contacts = np.asarray(s["n_contacts"])
+    np.testing.assert_array_equal(contacts > 0, np.asarray(t["n_contacts"]) > 0)
+
+
+def test_pushed_field_touches_the_field_on_the_gpu(gpu):
+    """The reproduction of issue 28: on Vulkan in float32 the pusher never reached the
+    field (no contact, 0 J in, the file marked complete)."""
+    arch, precision = gpu
+    got = on_here("pushed_field", "coulomb", SCENES["pushed_field"], arch, precision)
+    assert np.max(got["series"]["n_contacts"]) > 0
+    assert got["series"]["work_in"][-1] > 0.0
+
+
+@pytest.mark.parametrize("stepping", ["worlds", "bodies"])
+def test_a_batch_on_the_gpu_equals_each_layout_alone(stepping, gpu):
+    """Three layouts of the pillar as one batch, against each run alone, by each stepping:
+    worlds do not touch each other, whichever way the GPU steps them."""
+    arch, precision = gpu
+    base = load_scenario("pillar")
+    scenes = [base.reseeded(base.simulation.seed + k) for k in range(3)]
+    batch = Simulation(scenes, arch=arch, precision=precision, stepping=stepping)
+    batch.run(until=0.3)
+    pos = batch.world.positions()
+    for k, (scene, sl) in enumerate(zip(scenes, batch.world.world_slices())):
+        alone = Simulation(scene, arch=arch, precision=precision, stepping=stepping)
+        alone.run(until=0.3)
+        np.testing.assert_allclose(
+            pos[sl], alone.world.positions(), rtol=0, atol=RTOL[precision] * 100, err_msg=k
+        )
+
+
+def test_every_field_of_a_world_holds_its_own_values(taichi_runtime):
+    """Each field of a World filled with its own number reads back as that number, on any
+    arch: Taichi 1.7.4's SPIR-V backend overlapped a 32-bit field of an odd length with the
+    64-bit field beside it (4 of a World's 33 fields on Vulkan, before ``state.Fields`` laid
+    them out 64-bit first with pads)."""
+    from taichi_ice.world import World
+
+    arch, precision = taichi_runtime
+    world = World([load_scenario("two_squares")], precision=precision, stepping="bodies")
+    groups = (world.model, world.data, world.neighbours, world.hash)
+    fields = [(f"{g.__class__.__name__}.{n}", getattr(g, n)) for g in groups for n in g.names]
+    for k, (_, field) in enumerate(fields):
+        field.fill(k + 1)
+    lost = [name for k, (name, field) in enumerate(fields) if not np.all(field.to_numpy() == k + 1)]
+    assert not lost, f"on {arch}/{precision}"

@@ -98,12 +98,9 @@ class SpatialHash(Fields, Stage):
                 self.bucket_end[k] = running
                 running += self.bucket_count[k]
             self.block_total[blk] = running
-        # One thread runs the running sum (an inner loop is serial on every backend; Taichi's
-        # SPIR-V backend, Vulkan and Metal, ignores loop_config(serialize=True) on an outer
-        # one, so the sum raced there and the hash lost pairs: tests/test_contact.py on
-        # --arch vulkan).
-        for _ in range(1):
-            for blk in range(1, self.n_blocks):
+        ti.loop_config(serialize=True)
+        for blk in range(self.n_blocks):
+            if blk > 0:
                 self.block_total[blk] += self.block_total[blk - 1]
         for k in range(self.mask + 1):
             blk = k // SCAN

@@ -580,32 +580,19 @@ def _check_time_step(scene: Scene, labels: list[str]) -> None:
 def _what_sets_the_limit(scene: Scene, labels: list[str]) -> str:
     """The fix for a stable dt too small to run: the block and the [ice] keys that set it."""
     ice = scene.ice
-    worst, limits = None, {}
-    for i, b in enumerate(scene.bodies):
-        if b.kind != BodyKind.DYNAMIC.label:
-            continue
-        key = b.vertices.tobytes()
-        if key not in limits:
-            limits[key] = body_contact_limit(
-                b.vertices,
-                ice.density,
-                ice.thickness,
-                ice.contact_stiffness,
-                ice.contact_viscosity,
-                ice.tangential_stiffness,
-                ice.tangential_damping,
-            )
-        if worst is None or limits[key] < limits[scene.bodies[worst].vertices.tobytes()]:
-            worst = i
-    if worst is None:
+    limits: dict[bytes, float] = {}  # by outline: a field repeats one thousands of times
+
+    def limit(i: int) -> float:
+        v = scene.bodies[i].vertices
+        if v.tobytes() not in limits:
+            limits[v.tobytes()] = body_contact_limit(v, *scene.limit_args)
+        return limits[v.tobytes()]
+
+    dynamic = [i for i, b in enumerate(scene.bodies) if b.kind == BodyKind.DYNAMIC.label]
+    if not dynamic:
         return "shorten the duration"
-    _, z = contact_damping(
-        scene.bodies[worst].vertices,
-        ice.density,
-        ice.thickness,
-        ice.contact_stiffness,
-        ice.contact_viscosity,
-    )
+    worst = min(dynamic, key=limit)
+    _, z = contact_damping(scene.bodies[worst].vertices, *scene.limit_args[:4])
     block = (
         f"{labels[worst]} weighs {scene.masses[worst]:.3g} kg ([ice] thickness = "
         f"{ice.thickness:.3g} m, density = {ice.density:.3g} kg/m^3)"

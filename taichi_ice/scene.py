@@ -356,10 +356,14 @@ class Scene:
     @cached_property
     def stable_dt(self) -> float:
         """Stability limit of the contact integration over the dynamic bodies, s (inf if none)."""
-        ice = self.ice
         outlines = (b.vertices for b in self.bodies if b.kind == _DYNAMIC)
-        return stable_time_step(
-            outlines,
+        return stable_time_step(outlines, *self.limit_args)
+
+    @property
+    def limit_args(self) -> tuple[float, ...]:
+        """The ice properties ``timestep.body_contact_limit`` takes after an outline."""
+        ice = self.ice
+        return (
             ice.density,
             ice.thickness,
             ice.contact_stiffness,

@@ -47,6 +47,19 @@ def oscillator_limit(k: float, c: float, m_eff: float) -> float:
     return (2.0 / w) / (math.hypot(1.0, z) + z)
 
 
+def _stiffest_contact(vertices: np.ndarray, density: float, thickness: float):
+    """``(m_eff, L)`` of the stiffest contact between two copies of one body: the effective
+    mass of two such bodies hit at their farthest corner (kg) and the widest contact its
+    edges allow (its longest edge, m)."""
+    area, centroid, polar = mass_properties(vertices)
+    mass = density * thickness * area
+    inertia = density * thickness * polar
+    rel = np.asarray(vertices, dtype=np.float64) - centroid
+    radius = float(np.max(np.hypot(rel[:, 0], rel[:, 1])))
+    m_eff = 1.0 / (2.0 * (1.0 / mass + radius * radius / inertia))
+    return m_eff, longest_edge(rel)
+
+
 def body_contact_limit(
     vertices: np.ndarray,
     density: float,
@@ -66,13 +79,7 @@ def body_contact_limit(
         tangential_stiffness: ``k_t / (k_e L)``. tangential_damping: the tangential dashpot's
             fraction of critical damping.
     """
-    area, centroid, polar = mass_properties(vertices)
-    mass = density * thickness * area
-    inertia = density * thickness * polar
-    rel = np.asarray(vertices, dtype=np.float64) - centroid
-    radius = float(np.max(np.hypot(rel[:, 0], rel[:, 1])))
-    width = longest_edge(rel)
-    m_eff = 1.0 / (2.0 * (1.0 / mass + radius * radius / inertia))
+    m_eff, width = _stiffest_contact(vertices, density, thickness)
     normal = oscillator_limit(stiffness * width, viscosity * width, m_eff)
     k_t = tangential_stiffness * stiffness * width
     tangential = oscillator_limit(k_t, 2.0 * tangential_damping * math.sqrt(k_t * m_eff), m_eff)
@@ -85,13 +92,7 @@ def contact_damping(
     """``(m_eff, z)`` of the stiffest contact between two copies of one dynamic body (the
     effective mass, kg, and the normal dashpot's fraction of critical damping that
     ``body_contact_limit`` uses): what an error message says sets the limit."""
-    area, centroid, polar = mass_properties(vertices)
-    mass = density * thickness * area
-    inertia = density * thickness * polar
-    rel = np.asarray(vertices, dtype=np.float64) - centroid
-    radius = float(np.max(np.hypot(rel[:, 0], rel[:, 1])))
-    width = longest_edge(rel)
-    m_eff = 1.0 / (2.0 * (1.0 / mass + radius * radius / inertia))
+    m_eff, width = _stiffest_contact(vertices, density, thickness)
     k, c = stiffness * width, viscosity * width
     return m_eff, c / (2.0 * math.sqrt(k) * math.sqrt(m_eff))
 

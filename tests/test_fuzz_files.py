@@ -16,20 +16,20 @@ import shutil
 import tempfile
 from pathlib import Path
 
+import hypothesis
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+from test_fuzz_scenes import leaves  # every table entry and array item
 
-hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, Phase, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-
-from taichi_ice import Simulation, load_scenario  # noqa: E402
-from taichi_ice import checkpoint as ckpt  # noqa: E402
-from taichi_ice.cli import main  # noqa: E402
-from taichi_ice.errors import TaichiIceError  # noqa: E402
-from taichi_ice.io import read_run  # noqa: E402
-from taichi_ice.sweep import parse_sweep  # noqa: E402
-from taichi_ice.tomlio import dump_toml  # noqa: E402
+from taichi_ice import Simulation, load_scenario
+from taichi_ice import checkpoint as ckpt
+from taichi_ice.cli import main
+from taichi_ice.errors import TaichiIceError
+from taichi_ice.io import read_run
+from taichi_ice.sweep import parse_sweep
+from taichi_ice.tomlio import dump_toml
 
 ROOT = Path(__file__).resolve().parents[1]
 TWO_SQUARES = ROOT / "scenarios" / "two_squares.toml"
@@ -59,15 +59,6 @@ VALUES = st.recursive(
     ),
     max_leaves=8,
 )
-
-
-def leaves(node, path=()):
-    """Every (path, value) below ``node``: table entries and array items."""
-    items = node.items() if isinstance(node, dict) else enumerate(node)
-    for key, value in items:
-        yield (*path, key), value
-        if isinstance(value, (dict, list)):
-            yield from leaves(value, (*path, key))
 
 
 @st.composite

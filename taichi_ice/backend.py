@@ -72,6 +72,84 @@ def actual_arch() -> str | None:
 # GLSL.std.450, Metal's): the kernels take fdlibm's (``fmath``, ``geometry.rotation_ti``).
 SPIRV_ARCHES = ("vulkan", "metal", "opengl", "gles", "dx11")
 
+# Whether integer atomics inside a loop run right on the device: False on Mesa 22's
+# lavapipe (Debian 12's software Vulkan), where a loop that holds one, executed or not,
+# stops after 2-3 iterations (``_integer_atomics_in_loops_work``). None before ``init``.
+_int_atomics_ok: bool | None = None
+# Whether the device lets one GPU thread loop as long as it likes: False on Mesa 22's
+# lavapipe, whose shaders stop every loop once a thread has taken 65,535 turns of loops in
+# all (llvmpipe's loop limiter; ``_loops_uncapped``). None before ``init``.
+_loops_ok: bool | None = None
+# Turns of a loop the probe asks one thread for: past lavapipe 22's 65,535.
+_PROBE_TURNS = 70_000
+
+
+def loops_capped() -> bool:
+    """Whether a GPU thread's loops stop after a fixed number of turns on this device
+    (``_loops_uncapped``): the thread-per-world stepper then takes a step per launch
+    (``world.World``), and every launch checks that its threads ran to the end."""
+    return _loops_ok is False
+
+
+def float_gather() -> bool:
+    """Whether contact forces are gathered in float64 holding whole quanta instead of
+    64-bit integers (``state.FORCE_QUANTUM``): only on a device whose integer atomics fail
+    inside loops (``_integer_atomics_in_loops_work``). The sums are the same integers
+    while a body's force stays below 2^53 quanta (5.4e8 N); read when a kernel compiles."""
+    return _int_atomics_ok is False
+
+
+def _integer_atomics_in_loops_work() -> bool:
+    """Run the smallest kernel that Mesa 22's lavapipe gets wrong: one thread loops 64
+    times, writing each index, past an integer atomic it never executes. A correct device
+    writes all 64; lavapipe 22.3 writes 3. (Float atomics in the same loop run right.)"""
+    import numpy as np
+    import taichi as ti
+
+    builder = ti.FieldsBuilder()
+    out, flag = ti.field(ti.i32), ti.field(ti.i32)
+    builder.dense(ti.i, 64).place(out)
+    builder.place(flag)
+    tree = builder.finalize()
+
+    @ti.kernel
+    def probe():
+        for _ in range(1):
+            for i in range(64):
+                out[i] = i + 1
+                if i > 1000:
+                    ti.atomic_max(flag[None], i)
+
+    probe()
+    works = bool(np.array_equal(out.to_numpy(), np.arange(1, 65)))
+    tree.destroy()
+    return works
+
+
+def _loops_uncapped() -> bool:
+    """Whether one thread counts to ``_PROBE_TURNS`` in a loop (lavapipe 22 stops at
+    65,535: llvmpipe counts a thread's turns of all its loops against one limit)."""
+    import taichi as ti
+
+    builder = ti.FieldsBuilder()
+    out, asked = ti.field(ti.i32), ti.field(ti.i32)
+    builder.place(out, asked)
+    tree = builder.finalize()
+
+    @ti.kernel
+    def probe():
+        for _ in range(1):
+            turns = 0
+            for _i in range(asked[None]):  # read at run time: no compiler can count it
+                turns += 1
+            out[None] = turns
+
+    asked[None] = _PROBE_TURNS
+    probe()
+    works = int(out[None]) == _PROBE_TURNS
+    tree.destroy()
+    return works
+
 
 def portable_f64() -> bool:
     """Whether the running Taichi computes in float64 on a backend without float64 exp,
@@ -105,6 +183,13 @@ def cpu_threads() -> int:
 # Trees of fields a process can hold on Taichi's CPU and CUDA backends (its LLVM runtime's
 # kMaxNumSnodeTreesLlvm); one more crashes the process.
 MAX_FIELD_TREES = 512
+
+
+def field_tree_limit() -> int | None:
+    """The most trees of fields this process's backend holds: ``MAX_FIELD_TREES`` on the
+    CPU and CUDA, None (no limit of Taichi's) on SPIR-V backends, where a process held 700
+    in a check on lavapipe and a World takes ~7 (``state.Fields``)."""
+    return None if _actual in SPIRV_ARCHES else MAX_FIELD_TREES
 
 
 def field_trees() -> int:
@@ -221,7 +306,7 @@ def init(
         ValueError: unknown arch or precision, or a different arch/precision than the
             running one without ``reinit``.
     """
-    global _current, _actual
+    global _current, _actual, _int_atomics_ok, _loops_ok
     if arch not in ARCHES:
         raise ValueError(f"arch must be one of {ARCHES}, got {arch!r}")
     real_dtype(precision)
@@ -269,6 +354,9 @@ def init(
         )
     _current = wanted
     _actual = _running_arch()
+    spirv = _actual in SPIRV_ARCHES
+    _int_atomics_ok = _integer_atomics_in_loops_work() if spirv else True
+    _loops_ok = _loops_uncapped() if spirv else True
 
 
 @contextlib.contextmanager

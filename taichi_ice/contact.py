@@ -28,7 +28,10 @@ memory out (``remember``) before writing this step's over it. More than K contac
 the overflow status, which the simulation turns into an error.
 
 Forces are gathered in 64-bit fixed point (``state.FORCE_QUANTUM``), so a run is bit-for-bit
-reproducible on any number of threads and in any batch.
+reproducible on any number of threads and in any batch. (On a device whose integer atomics
+fail inside loops the whole quanta are summed in float64, exact below 2^53 of them:
+``backend.float_gather``.) Overflow reports there are plain stores of a count above the
+limit (``raise_status``), not the largest such count.
 
 The contact laws are pure functions, each twice (``taichi_ice``'s twin convention: the plain
 name is the NumPy reference, ``_ti`` the Taichi function): ``normal_force``,
@@ -52,12 +55,13 @@ from typing import ClassVar
 
 import taichi as ti
 
+from . import backend
 from .broadphase import bucket_of
 from .codes import BodyEnergy, BodyKind, Status
 from .geometry import facing_gap_ti, overlap_normals_ti
 from .schema import Access, Layout, Stage
 from .slip import NEW_CONTACT, NEWTON_TOLERANCE, contact_friction_ti
-from .state import FORCE_QUANTUM, Data, Model
+from .state import FORCE_QUANTUM, Data, Model, quantum_dtype
 
 # Round-off allowance of a gap that lets a pair be skipped (``ContactStage.gap_bound``), as
 # a fraction of the two circumradii: 1e-5 m for two of the paper's diamonds, against ~1e-7 m
@@ -475,12 +479,14 @@ class ContactStage(Stage):
         """Add a contact's force and torque to body i, in fixed point: atomically when
         bodies are stepped in parallel, plainly when a thread steps the whole world
         (``serial``); integer sums are the same in any order either way."""
-        d, q = ti.static((self.data, 1.0 / FORCE_QUANTUM))
-        fx = ti.cast(force[0] * q, ti.i64)
-        fy = ti.cast(force[1] * q, ti.i64)
-        tq = ti.cast(torque * q, ti.i64)
+        d, q, qt = ti.static((self.data, 1.0 / FORCE_QUANTUM, quantum_dtype()))
+        # Truncated to whole quanta as 64-bit integers, then held as the sums' type (the
+        # same integers in float64, ``backend.float_gather``).
+        fx = ti.cast(ti.cast(force[0] * q, ti.i64), qt)
+        fy = ti.cast(ti.cast(force[1] * q, ti.i64), qt)
+        tq = ti.cast(ti.cast(torque * q, ti.i64), qt)
         if ti.static(serial):
-            d.body_force_q[i] = d.body_force_q[i] + ti.Vector([fx, fy], ti.i64)
+            d.body_force_q[i] = d.body_force_q[i] + ti.Vector([fx, fy], qt)
             d.body_torque_q[i] = d.body_torque_q[i] + tq
         else:
             ti.atomic_add(d.body_force_q[i][0], fx)
@@ -806,7 +812,7 @@ class ContactStage(Stage):
         # More contacts than slots is reported (never silently dropped): the caller turns it
         # into CapacityError. (The list's own overflow is reported when it is built.)
         if used > self.layout.slots:
-            ti.atomic_max(d.status[self.model.body_world[i], Status.SLOT_OVERFLOW], used)
+            self.raise_status(self.model.body_world[i], Status.SLOT_OVERFLOW, used)
 
     @ti.func
     def gap_bound(self, i, j, gap, path_i):
@@ -854,7 +860,19 @@ class ContactStage(Stage):
         for k in range(ti.min(n, self.layout.slots)):
             nb.nbr_gap[i, k] = ti.cast(-1.0, ti.f32)
         if n > self.layout.nbr_len:
-            ti.atomic_max(d.status[self.model.body_world[i], Status.LIST_OVERFLOW], n)
+            self.raise_status(self.model.body_world[i], Status.LIST_OVERFLOW, n)
+
+    @ti.func
+    def raise_status(self, w, code: ti.template(), value):
+        """Raise world w's status word ``code`` to ``value``: atomically, or where integer
+        atomics fail inside loops (``backend.float_gather``) by a plain store when it is
+        higher, which another body of the world may overwrite with its own count above
+        the limit (the overflow is still reported; the count may not be the largest)."""
+        if ti.static(backend.float_gather()):
+            if value > self.data.status[w, code]:
+                self.data.status[w, code] = value
+        else:
+            ti.atomic_max(self.data.status[w, code], value)
 
     @ti.func
     def build_list(self, i):

@@ -11,9 +11,11 @@ put back. Within 1 ulp of NumPy's (``tests/test_fmath.py``: 2e5 seeded arguments
 ranges the laws use and beyond).
 
 ``exp_ti``/``log_ti`` are the Taichi functions; ``exp``/``log`` their NumPy twins, step for
-step, so the two agree bit for bit. Kernels call ``exp_any``/``log_any``: the
-backend's own ``ti.exp``/``ti.log`` wherever it has them (CPU and CUDA: the results there
-stay bit for bit what they were), these where it does not (``backend.portable_f64``). The
+step, so the two agree bit for bit (on the CPU and CUDA; a SPIR-V driver may fuse their
+multiply-adds, which moves log by an ulp in 2 % of arguments on lavapipe). Kernels call
+``exp_any``/``log_any``: the backend's own ``ti.exp``/``ti.log`` wherever it has them (CPU
+and CUDA: the results there stay bit for bit what they were; float32 everywhere), these
+for a float64 argument where it does not (Vulkan, Metal). The
 rotation's ``cos`` and ``sin`` are fdlibm's already (``geometry.rotation_ti``).
 
 Special cases as the laws meet them: ``log`` of 0 is ``-inf``, of a negative number or NaN
@@ -134,13 +136,19 @@ def exp(x) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
+# Every constant of the Taichi functions is a float64 as written: a bare Python number in a
+# kernel takes the run's default float, float32 in a float32 run, where these functions
+# still compute in float64 (the twins of float64 data, on Vulkan).
+F64 = ti.f64
+
+
 @ti.func
 def log_ti(x_in):
     """Natural logarithm of a float64 by fdlibm's method (twin: :func:`log`)."""
     x = ti.cast(x_in, ti.f64)
     k = ti.cast(0, ti.i64)
-    if x > 0.0 and x < 2.2250738585072014e-308:
-        x = x * _TWO54
+    if x > 0.0 and x < F64(2.2250738585072014e-308):
+        x = x * F64(_TWO54)
         k = -54
     bits = ti.bit_cast(x, ti.i64)
     hx = bits >> 32
@@ -149,26 +157,27 @@ def log_ti(x_in):
     i = (hx + 0x95F64) & 0x100000
     xn = ti.bit_cast(((hx | (i ^ 0x3FF00000)) << 32) | (bits & ti.i64(0xFFFFFFFF)), ti.f64)
     k += i >> 20
-    f = xn - 1.0
-    s = f / (2.0 + f)
+    f = xn - F64(1.0)
+    s = f / (F64(2.0) + f)
     z = s * s
     w = z * z
-    g1, g2, g3, g4, g5, g6, g7 = ti.static(_LG)
+    c1, c2, c3, c4, c5, c6, c7 = ti.static(_LG)
+    g1, g2, g3, g4, g5, g6, g7 = F64(c1), F64(c2), F64(c3), F64(c4), F64(c5), F64(c6), F64(c7)
     t1 = w * (g2 + w * (g4 + w * g6))
     t2 = z * (g1 + w * (g3 + w * (g5 + w * g7)))
     r = t2 + t1
     dk = ti.cast(k, ti.f64)
-    y = 0.0
+    y = F64(0.0)
     if ((hx - 0x6147A) | (0x6B851 - hx)) > 0:
-        hfsq = 0.5 * f * f
-        y = dk * _LN2_HI - ((hfsq - (s * (hfsq + r) + dk * _LN2_LO)) - f)
+        hfsq = F64(0.5) * f * f
+        y = dk * F64(_LN2_HI) - ((hfsq - (s * (hfsq + r) + dk * F64(_LN2_LO))) - f)
     else:
-        y = dk * _LN2_HI - ((s * (f - r) - dk * _LN2_LO) - f)
+        y = dk * F64(_LN2_HI) - ((s * (f - r) - dk * F64(_LN2_LO)) - f)
     if x == 0.0:
         y = -ti.math.inf
     elif not x >= 0.0:  # negative or NaN
         y = ti.math.nan
-    elif x > 1.7976931348623157e308:
+    elif x > F64(1.7976931348623157e308):
         y = ti.math.inf
     return y
 
@@ -177,30 +186,31 @@ def log_ti(x_in):
 def exp_ti(x_in):
     """Exponential of a float64 by fdlibm's method (twin: :func:`exp`)."""
     x = ti.cast(x_in, ti.f64)
-    half = 0.5
+    half = F64(0.5)
     if x < 0.0:
-        half = -0.5
+        half = F64(-0.5)
     xs = x
-    if not ti.abs(x) < 1e4:  # huge or NaN: decided below, keep k finite
-        xs = 0.0
-    k = ti.cast(_INV_LN2 * xs + half, ti.i64)  # truncation, as C's (int)
+    if not ti.abs(x) < F64(1e4):  # huge or NaN: decided below, keep k finite
+        xs = F64(0.0)
+    k = ti.cast(F64(_INV_LN2) * xs + half, ti.i64)  # truncation, as C's (int)
     dk = ti.cast(k, ti.f64)
-    hi = x - dk * _LN2_HI
-    lo = dk * _LN2_LO
+    hi = x - dk * F64(_LN2_HI)
+    lo = dk * F64(_LN2_LO)
     r = hi - lo
     t = r * r
-    p1, p2, p3, p4, p5 = ti.static(_P)
+    c1, c2, c3, c4, c5 = ti.static(_P)
+    p1, p2, p3, p4, p5 = F64(c1), F64(c2), F64(c3), F64(c4), F64(c5)
     c = r - t * (p1 + t * (p2 + t * (p3 + t * (p4 + t * p5))))
-    y = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi)
-    out = 0.0
+    y = F64(1.0) - ((lo - (r * c) / (F64(2.0) - c)) - hi)
+    out = F64(0.0)
     if k >= -1021:
         out = ti.bit_cast(ti.bit_cast(y, ti.i64) + (k << 52), ti.f64)
     else:
-        out = ti.bit_cast(ti.bit_cast(y, ti.i64) + ((k + 1000) << 52), ti.f64) * _TWO_M1000
-    if x > _O_THRESHOLD:
+        out = ti.bit_cast(ti.bit_cast(y, ti.i64) + ((k + 1000) << 52), ti.f64) * F64(_TWO_M1000)
+    if x > F64(_O_THRESHOLD):
         out = ti.math.inf
-    elif x < _U_THRESHOLD:
-        out = 0.0
+    elif x < F64(_U_THRESHOLD):
+        out = F64(0.0)
     elif not x == x:
         out = ti.math.nan
     return out
@@ -208,10 +218,12 @@ def exp_ti(x_in):
 
 @ti.func
 def exp_any(x):
-    """``exp(x)`` on any backend: its own where it has one (CPU, CUDA: bit for bit what it
-    was), :func:`exp_ti` in float64 on Vulkan and Metal (``backend.portable_f64``)."""
+    """``exp(x)`` on any backend: its own where it has one (CPU, CUDA, and float32
+    everywhere: bit for bit what it was), :func:`exp_ti` for a float64 ``x`` on Vulkan and
+    Metal, which have no float64 exp (decided by ``x``'s type, not the run's precision: a
+    float32 run computes some things in float64)."""
     y = x
-    if ti.static(backend.portable_f64()):
+    if ti.static(_portable(x)):
         y = exp_ti(x)
     else:
         y = ti.exp(x)
@@ -222,11 +234,20 @@ def exp_any(x):
 def log_any(x):
     """``log(x)`` on any backend, as :func:`exp_any`."""
     y = x
-    if ti.static(backend.portable_f64()):
+    if ti.static(_portable(x)):
         y = log_ti(x)
     else:
         y = ti.log(x)
     return y
+
+
+def _portable(x) -> bool:
+    """Whether the Taichi expression ``x`` is float64 on a backend without float64 exp and
+    log (``backend.SPIRV_ARCHES``): read when a kernel compiles."""
+    if backend.actual_arch() not in backend.SPIRV_ARCHES:
+        return False
+    ptr = getattr(x, "ptr", None)  # a Python number takes the run's precision
+    return backend.portable_f64() if ptr is None else ptr.get_rvalue_type() == ti.f64
 
 
 __all__ = ["exp", "exp_any", "exp_ti", "log", "log_any", "log_ti"]

@@ -23,7 +23,7 @@ from .codes import BodyEnergy, BodyKind, Status
 from .drag import water_drag_ti
 from .geometry import rotation_ti
 from .schema import Access, Layout, Stage
-from .state import FORCE_QUANTUM, Data, Model
+from .state import FORCE_QUANTUM, Data, Model, quantum_dtype
 
 
 @ti.data_oriented
@@ -152,10 +152,10 @@ class Integrator(Stage):
         Only body i's thread writes its rows (state, energy, probe), so they are updated
         with plain stores: an augmented assignment to a field is an atomic in Taichi (a
         compare-and-swap loop for a float), which the step does not need."""
-        m, d = ti.static((self.model, self.data))
+        m, d, qt = ti.static((self.model, self.data, quantum_dtype()))
         f = ti.cast(d.body_force_q[i], self.layout.real) * FORCE_QUANTUM
         tau = ti.cast(d.body_torque_q[i], self.layout.real) * FORCE_QUANTUM
-        d.body_force_q[i] = ti.Vector([0, 0], ti.i64)
+        d.body_force_q[i] = ti.Vector([0, 0], qt)
         d.body_torque_q[i] = 0
         p = m.body_probe[i]
         if p >= 0:

@@ -18,7 +18,7 @@ from collections.abc import Iterable
 import numpy as np
 import taichi as ti
 
-from . import schema
+from . import backend, schema
 from .schema import HostArrays, Layout, Var
 
 # Contact and body forces are gathered in 64-bit fixed point of this resolution (N, N m):
@@ -29,9 +29,20 @@ FORCE_QUANTUM = 2.0**-24
 
 _TI_DTYPES = {"f64": ti.f64, "f32": ti.f32, "i32": ti.i32, "i64": ti.i64}
 
+# The fixed-point force sums: float64 holding whole quanta where the device's integer
+# atomics fail inside loops (``backend.float_gather``), else 64-bit integers.
+GATHERED = ("body_force_q", "body_torque_q")
+
+
+def quantum_dtype():
+    """The Taichi type of the fixed-point force sums (``GATHERED``) on this device."""
+    return ti.f64 if backend.float_gather() else ti.i64
+
 
 def ti_dtype(v: Var, layout: Layout):
     """The Taichi element type of a declared field in this layout's precision."""
+    if v.name in GATHERED:
+        return quantum_dtype()
     return _TI_DTYPES[layout.precision if v.dtype == "real" else v.dtype]
 
 
@@ -47,6 +58,24 @@ def make_field(v: Var, layout: Layout):
 
 def _scalar_bytes(v: Var, layout: Layout) -> int:
     return 8 if ti_dtype(v, layout) in (ti.f64, ti.i64) else 4
+
+
+# The width (bytes) of the fields waiting in Taichi's open tree, on SPIR-V (``Fields``).
+_open_width: int | None = None
+
+
+def _join_tree(width: int) -> None:
+    """Before a field of ``width`` bytes on SPIR-V: put the fields declared since the last
+    tree in a tree of their own if they have the other width (what Taichi does at the next
+    kernel launch), so that no tree mixes 32-bit and 64-bit fields."""
+    global _open_width
+    from taichi.lang import impl
+
+    if impl._root_fb.empty:  # a launch closed the last tree
+        _open_width = None
+    if _open_width is not None and _open_width != width:
+        impl.get_runtime().materialize()
+    _open_width = width
 
 
 class Fields:
@@ -69,9 +98,15 @@ class Fields:
         # [i64 (2,), i32 (), f32 ()] do not). In a World 4 of 33 fields lost values: a
         # contact was missed for a step, and pushed_field never met its pusher. So the
         # 64-bit fields come first, and a 32-bit field of an odd number of elements is
-        # followed by a 4-byte pad. The CPU and CUDA compute the same either way.
+        # followed by a 4-byte pad. That was not enough: a 3-body World in float32 still
+        # lost 4 fields (body_pos, body_vel, probe_impulse, nbr_ref_angle) on lavapipe. So
+        # there no tree holds fields of both widths (``_join_tree``): a World's fields take
+        # ~5 trees instead of 2. The CPU and CUDA compute the same either way.
         self._pads = []
+        split = backend.actual_arch() in backend.SPIRV_ARCHES
         for v in sorted(decls, key=lambda v: -_scalar_bytes(v, layout)):
+            if split:
+                _join_tree(_scalar_bytes(v, layout))
             field = make_field(v, layout)
             setattr(self, v.name, field)
             size = int(np.prod(schema.allocated_shape(layout, v), dtype=np.int64)) * v.lanes

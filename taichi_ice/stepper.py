@@ -23,12 +23,14 @@ in parallel over its bodies (``World.step``): ``World`` chooses (``stepping``).
 
 from typing import ClassVar
 
+import numpy as np
 import taichi as ti
 
 from . import backend
 from .broadphase import NeighbourList
 from .contact import ContactStage
 from .energy import EnergyMeter
+from .errors import BackendError
 from .integrate import Integrator
 from .schema import Access, Layout, Stage
 from .state import Data, Model
@@ -174,18 +176,50 @@ class WorldStepper(Stage):
             for i in range(lo, hi):
                 self.integrator.body(i, dt)  # marks the lists stale
 
+    def launch(self, plan: np.ndarray, rows: np.ndarray, impulses: np.ndarray) -> None:
+        """``run`` the plan, rows ``(steps, take)``, and check that every world's thread ran
+        to its end. Where the device caps a thread's loops (``backend.loops_capped``: Mesa
+        22's lavapipe stops them after 65,535 turns in all) a launch takes one step, and a
+        step that alone goes past the cap is an error, never a shortened step."""
+        if not backend.loops_capped():
+            self._checked(plan, rows, impulses)
+            return
+        for s, (n, take) in enumerate(np.asarray(plan, dtype=np.int32).reshape(-1, 2)):
+            for k in range(max(int(n), 1)):
+                last = k == max(int(n), 1) - 1
+                one = np.array([[min(int(n), 1), take if last else NO_SAMPLE]], dtype=np.int32)
+                self._checked(one, rows[s : s + 1], impulses[s : s + 1])
+
+    def _checked(self, plan: np.ndarray, rows: np.ndarray, impulses: np.ndarray) -> None:
+        turns = np.full(self.layout.n_worlds, self.CANARY_TURNS, dtype=np.int32)
+        self.run(plan, rows, impulses, turns)
+        if np.any(turns != self.CANARY_TURNS):
+            raise BackendError(
+                f"the {backend.actual_arch()} device stopped a world's thread part-way through "
+                f"its loops (world {int(np.flatnonzero(turns != self.CANARY_TURNS)[0])}): its "
+                "driver caps the turns a GPU thread may take (Mesa 22's lavapipe: 65,535), and "
+                "one step of this world takes more; step it a kernel per stage "
+                "(stepping='bodies') or use another driver (Mesa 25 has no such cap)"
+            )
+
+    # Turns of the loop each world's thread takes last (``run``): a device that cut the
+    # thread's loops short takes one.
+    CANARY_TURNS = 2
+
     @ti.kernel
     def run(
         self,
         plan: ti.types.ndarray(dtype=ti.i32, ndim=2),
         rows: ti.types.ndarray(dtype=ti.f64, ndim=3),
         impulses: ti.types.ndarray(dtype=ti.f64, ndim=3),
+        turns: ti.types.ndarray(dtype=ti.i32, ndim=1),
     ):
         """Steps and samples in one launch: for each row s of ``plan`` (steps, take), its
         steps of every world, then the world's sample ``s`` (``EnergyMeter.sample``) unless
         ``take`` is ``NO_SAMPLE``; ``take`` 1 restarts the probes' impulses (a recorded
         sample), 0 lets them add up. One kernel for stepping with and without samples: a
-        layout compiles it once."""
+        layout compiles it once. Last, each world's thread loops ``turns[w]`` times and
+        writes back how many turns it took (``launch`` checks them)."""
         ti.loop_config(block_dim=self.world_block)
         for w in range(self.layout.n_worlds):
             dt = self.data.time_step[None]
@@ -193,6 +227,10 @@ class WorldStepper(Stage):
                 self.steps(w, plan[s, 0], dt)
                 if plan[s, 1] != NO_SAMPLE:
                     self.energy.sample(w, s, rows, impulses, plan[s, 1])
+            took = 0
+            for _k in range(turns[w]):  # read at run time: no compiler can count it
+                took += 1
+            turns[w] = took
 
 
 @ti.data_oriented

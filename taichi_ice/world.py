@@ -26,6 +26,7 @@ import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
+import taichi as ti
 
 from . import backend, schema, state
 from .assemble import LIST_SLOTS, assemble
@@ -68,7 +69,8 @@ FEW_WORLDS_MAX_BODIES = 2000
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
 GPU_MIN_WORLDS = 1024
 STEPPINGS = ("auto", "worlds", "bodies")
-# Trees of Taichi fields a World may add (``state.Fields``: 2, and the team's words).
+# Trees of Taichi fields a World may add on the CPU and CUDA (``state.Fields``: 2, and the
+# team's words; ~7 on SPIR-V, which has no limit).
 TREES_PER_WORLD = 3
 
 
@@ -118,7 +120,7 @@ class World:
 
     Raises:
         UsageError: the process holds too many of Taichi's trees of fields for another World
-            (``backend.MAX_FIELD_TREES``; Taichi never frees them).
+            (``backend.field_tree_limit``; Taichi never frees them).
     """
 
     def __init__(
@@ -134,11 +136,11 @@ class World:
         if stepping not in STEPPINGS:
             raise ValueError(f"stepping must be one of {STEPPINGS}, got {stepping!r}")
         backend.real_dtype(precision)
-        if backend.field_trees() + TREES_PER_WORLD > backend.MAX_FIELD_TREES:
+        limit = backend.field_tree_limit()
+        if limit is not None and backend.field_trees() + TREES_PER_WORLD > limit:
             raise UsageError(
                 f"this process holds {backend.field_trees()} trees of Taichi fields, the most "
-                f"it can ({backend.MAX_FIELD_TREES}: about "
-                f"{backend.MAX_FIELD_TREES // TREES_PER_WORLD}-{backend.MAX_FIELD_TREES // 2} "
+                f"it can ({limit}: about {limit // TREES_PER_WORLD}-{limit // 2} "
                 "Worlds; Taichi never frees them): step other scenes of the same layout on a "
                 "World built before (World.reload), or build the rest in a new process"
             )
@@ -190,6 +192,11 @@ class World:
         self._no_samples = (np.zeros((1, 1, SAMPLE_COLUMNS)), np.zeros((1, 1, 2)))
         self.steps = 0
         self.time = 0.0
+        # Let the device finish building the fields: on Vulkan (lavapipe, Mesa 22.3) the
+        # first kernel after a new World's last tree of fields read its velocities as zeros
+        # (the energies before the first step) unless the device had finished; a sync here
+        # made every later read right (tests/test_engine.py, sampled against stepped).
+        ti.sync()
 
     # ----------------------------------------------------------------------------------------
     # Reuse: other scenes on the same fields and compiled kernels
@@ -277,7 +284,7 @@ class World:
             return
         if self.stepping == "worlds":
             plan = np.array([[n, NO_SAMPLE]], dtype=np.int32)
-            self.stepper.run(plan, *self._no_samples)
+            self.stepper.launch(plan, *self._no_samples)
         elif self.team is not None:
             left = n
             while left > 0:
@@ -368,7 +375,7 @@ class World:
         impulses = np.zeros((len(plan), max(self.layout.n_probes, 1), 2))
         if len(plan):
             if self.stepping == "worlds":
-                self.stepper.run(plan, rows, impulses)
+                self.stepper.launch(plan, rows, impulses)
                 self.steps += int(plan[:, 0].sum())
                 self.time = self.steps * self.dt
             else:

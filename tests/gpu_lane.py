@@ -66,8 +66,23 @@ def device_answers(arch: str) -> bool:
     return True
 
 
+def describe(arch: str) -> str:
+    """One line on the device's force gather (``backend.float_gather``), from a child."""
+    code = (
+        f"from taichi_ice import backend; backend.init({arch!r}, 'f64'); "
+        "print('float64 sums of whole quanta (integer atomics fail inside loops here)' "
+        "if backend.float_gather() else '64-bit integer atomics')"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False
+    )
+    said = proc.stdout.strip().splitlines()
+    return said[-1] if proc.returncode == 0 and said else f"unknown (exit {proc.returncode})"
+
+
 def run_lane(arch: str, extra: list[str]) -> int:
     failed = 0
+    print(f"{arch} lane: forces gathered by {describe(arch)}", flush=True)
     for precision, files in LANE.items():
         start = time.perf_counter()
         cmd = [

@@ -15,8 +15,9 @@ import subprocess
 import sys
 
 import pytest
+import taichi as ti
 
-from taichi_ice import backend
+from taichi_ice import backend, state
 
 _RUN = """
 import hashlib, sys
@@ -106,3 +107,17 @@ def test_usable_cores_honours_a_cgroup_quota(monkeypatch):
     assert backend.usable_cores() == 4
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {3}, raising=False)
     assert backend.usable_cores() == 1
+
+
+def test_the_integer_atomics_probe_passes_on_a_correct_device(taichi_runtime):
+    """The probe that sends forces through float64 on Mesa 22's lavapipe must pass on a
+    device that loops right: on the CPU (and CUDA) forces stay 64-bit integers. On the lane's
+    arch it reports what that device does; the scenes against the CPU (test_gpu) hold either
+    way of gathering."""
+    arch, _ = taichi_runtime
+    works = backend._integer_atomics_in_loops_work()
+    assert works == backend._int_atomics_ok
+    if arch in ("cpu", "cuda"):
+        assert works and not backend.float_gather()
+        assert state.quantum_dtype() == ti.i64
+    assert state.quantum_dtype() == (ti.f64 if backend.float_gather() else ti.i64)

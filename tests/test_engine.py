@@ -20,12 +20,12 @@ import re
 import numpy as np
 import pytest
 
-from taichi_ice import DivergenceError, Simulation, StabilityError, load_scenario
+from taichi_ice import DivergenceError, Simulation, StabilityError, backend, load_scenario
 from taichi_ice.bench.scenes import bench_scene
 from taichi_ice.budget import residual as energy_residual
 from taichi_ice.codes import EnergyTerm, Status
 from taichi_ice.energy import CONTACTS_COLUMN, STATUS_COLUMN
-from taichi_ice.errors import CapacityError, UsageError
+from taichi_ice.errors import BackendError, CapacityError, UsageError
 from taichi_ice.friction import RateState
 from taichi_ice.geometry import diamond, rectangle, sat_separated, transform
 from taichi_ice.io import read_run
@@ -608,7 +608,8 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law):
     # The parallel step as a GPU runs it: its two kernels launched every step (on the CPU
     # a team of threads takes many steps per launch, ``stepper.BodyTeam``).
     by_kernels = World(scenes, dt=dt, stepping="bodies")
-    assert by_bodies.team is not None
+    if backend.actual_arch() == "cpu":  # the team is the CPU's; a GPU launches kernels
+        assert by_bodies.team is not None
     by_kernels.team = None
     start = by_worlds.positions()
     contacts = 0
@@ -639,6 +640,13 @@ def test_skipping_pairs_a_gap_keeps_apart_changes_nothing(f64, stepping):
     before each step, so that every listed pair is tested, gives the same state bit for bit
     over 300 steps of a box of thrown diamonds, while most listed pairs were being skipped."""
     scene, _ = bench_scene("random", 300, "coulomb", False, 3)
+    if stepping == "worlds" and backend.loops_capped():
+        # Where a GPU thread's loops stop after 65,535 turns (Mesa 22's lavapipe), one step
+        # of 300 bodies by one thread takes more: the stepper refuses it, never stepping it
+        # short. The claim is then held by stepping="bodies".
+        with pytest.raises(BackendError, match="65,535"):
+            World([scene], stepping=stepping).advance(1)
+        return
     skipping = World([scene], stepping=stepping)
     testing = World([scene], stepping=stepping)
     n = skipping.layout.n_bodies
@@ -666,9 +674,10 @@ def test_skipping_pairs_a_gap_keeps_apart_changes_nothing(f64, stepping):
 
 def test_a_world_past_taichis_field_trees_is_refused_with_a_clear_error(monkeypatch):
     """Taichi holds at most 512 trees of fields in a process and crashes on the next one; a
-    World that could cross the limit is refused first, with the way out."""
-    from taichi_ice import backend
-
+    World that could cross the limit is refused first, with the way out. (The CPU and
+    CUDA's limit: on Vulkan a process held 700 trees, ``backend.field_tree_limit``.)"""
+    if backend.field_tree_limit() is None:
+        pytest.skip("Taichi's SPIR-V backends have no limit on trees of fields")
     scene = load_scenario("scenarios/two_squares.toml")
     monkeypatch.setattr(backend, "field_trees", lambda: backend.MAX_FIELD_TREES - 1)
     with pytest.raises(UsageError, match=r"World\.reload.*new process"):
@@ -678,14 +687,15 @@ def test_a_world_past_taichis_field_trees_is_refused_with_a_clear_error(monkeypa
 def test_fields_of_a_world_take_two_trees(f64):
     """Fields are filled after a group is declared (state.Fields), so a World adds two trees
     of fields, not one per filled field: ~250 Worlds fit a process, not ~100."""
-    from taichi_ice import backend
-
     scene = load_scenario("scenarios/two_squares.toml")
     World([scene], stepping="worlds")  # anything pending from before goes into its trees
     before = backend.field_trees()
     World([scene], stepping="worlds")
     World([scene], stepping="worlds")
-    assert backend.field_trees() - before <= 2 * 2 + 1
+    # On SPIR-V no tree mixes 32-bit and 64-bit fields (state.Fields: Taichi's layout fault
+    # there), 6-7 a World; those backends have no limit on trees (field_tree_limit).
+    per_world = 2 if backend.field_tree_limit() is not None else 7
+    assert backend.field_trees() - before <= 2 * per_world + 1
 
 
 def test_auto_stepping_leaves_no_thread_idle_for_a_lone_large_world():
@@ -923,8 +933,6 @@ def test_taichi_keeps_the_compiled_kernels_of_many_layouts_between_processes(tai
     Taichi's default on-disk cache (100 MB, least recently used quarter dropped past it) is
     smaller than the test suite's kernels alone and made every run compile them again."""
     from taichi.lang import impl
-
-    from taichi_ice import backend
 
     config = impl.get_runtime().prog.config()
     assert config.offline_cache

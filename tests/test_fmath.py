@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from taichi_ice import fmath
+from taichi_ice import backend, fmath
 
 RNG = np.random.default_rng(20261126)
 ARGS = np.concatenate(
@@ -58,8 +58,29 @@ def same(a, b) -> np.ndarray:
 def test_the_taichi_functions_equal_their_numpy_twins_bit_for_bit(on_taichi):
     e, lg = on_taichi
     with np.errstate(all="ignore"):
-        assert np.all(same(e, fmath.exp(ARGS)))
-        assert np.all(same(lg, fmath.log(ARGS)))
+        equal = np.all(same(e, fmath.exp(ARGS))) and np.all(same(lg, fmath.log(ARGS)))
+    if backend.actual_arch() in backend.SPIRV_ARCHES:
+        # A strict expected failure: measured on lavapipe (Mesa 22.3.6), exp bit for bit and
+        # log 1 ulp off the twin in 1,197 of 62,020 arguments. Taichi's SPIR-V marks no
+        # product NoContraction, so the driver may fuse a * b + c into one rounding; the CPU
+        # and CUDA compile IEEE as written (backend.init: fast_math=False). The next test
+        # holds the device to NumPy.
+        assert not equal, "bit for bit on SPIR-V now: drop this expected failure"
+        pytest.xfail("the SPIR-V driver fused multiply-adds (see the next test)")
+    assert equal
+
+
+def test_the_taichi_functions_are_within_one_ulp_of_numpy_on_the_device(on_taichi):
+    """What the kernels rely on, on any arch: the device's exp and log within an ulp of
+    NumPy's (and as NumPy at overflow, underflow and the values that are not numbers)."""
+    for got, ref in zip(on_taichi, (np.exp, np.log)):
+        with np.errstate(all="ignore"):
+            want = ref(ARGS)
+        normal = np.isfinite(want) & (np.abs(want) >= np.finfo(np.float64).tiny)
+        ulps = np.abs(got[normal] - want[normal]) / np.abs(want[normal]) / np.finfo(float).eps
+        assert ulps.max() <= 1.0, (ref.__name__, ARGS[normal][np.argmax(ulps)])
+        rest = ~normal
+        assert np.all(same(got[rest], want[rest]) | (np.abs(got[rest] - want[rest]) < 1e-320))
 
 
 @pytest.mark.parametrize("name", ["exp", "log"])

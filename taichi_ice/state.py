@@ -101,7 +101,7 @@ class Fields:
         # followed by a 4-byte pad. That was not enough: a 3-body World in float32 still
         # lost 4 fields (body_pos, body_vel, probe_impulse, nbr_ref_angle) on lavapipe. So
         # there no tree holds fields of both widths (``_join_tree``): a World's fields take
-        # ~5 trees instead of 2. The CPU and CUDA compute the same either way.
+        # 6-7 trees instead of 2. The CPU and CUDA compute the same either way.
         self._pads = []
         split = backend.actual_arch() in backend.SPIRV_ARCHES
         for v in sorted(decls, key=lambda v: -_scalar_bytes(v, layout)):

@@ -502,6 +502,10 @@ def _terminate(signum, frame) -> None:
     raise Interrupted(f"stopped by {signal.Signals(signum).name}")
 
 
+# What Taichi's Vulkan runtime says when the driver refuses a launch (too many workgroups).
+DISPATCH_REFUSED = "Dispatch error"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -531,6 +535,20 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except FileNotFoundError as exc:
         print(f"taichi-ice: error: {exc.filename or exc}: no such file", file=sys.stderr)
+        return 2
+    except RuntimeError as exc:
+        if DISPATCH_REFUSED not in str(exc):
+            raise
+        # Taichi launches a thread an element; Vulkan promises 65,535 workgroups a launch
+        # and lavapipe gives no more (README, On GPUs).
+        print(
+            "taichi-ice: error: the GPU driver refused a kernel launch (Taichi: "
+            f"{printable(str(exc).strip().splitlines()[-1])}): some drivers (lavapipe) take at "
+            "most 65,535 workgroups of 128 threads, which a field of more than 8,388,480 "
+            "elements (a World past ~5e5 blocks) needs; run it with --arch cpu or on another "
+            "GPU (files written so far are kept)",
+            file=sys.stderr,
+        )
         return 2
     except KeyboardInterrupt:
         print("taichi-ice: interrupted (files written so far are kept)", file=sys.stderr)

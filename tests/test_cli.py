@@ -78,3 +78,27 @@ def test_plot_writes_figures(tmp_path):
     assert main(["plot", str(out), "--out", str(tmp_path / "figs")]) == 0
     names = sorted(p.name for p in (tmp_path / "figs").iterdir())
     assert names == ["sq_energy.png", "sq_positions.png", "sq_probe_force.png"]
+
+
+def test_a_launch_the_gpu_driver_refuses_ends_in_one_line_and_a_failed_file(
+    tmp_path, capsys, monkeypatch
+):
+    """Lavapipe refuses a launch of more than 65,535 workgroups (Taichi raises a bare
+    RuntimeError, "Dispatch error"): one line that says why and what to use, exit 2, and the
+    run file kept, marked failed. (The refusal is Taichi's own message, raised here.)"""
+    from taichi_ice.world import World
+
+    def refused(self, plan):
+        raise RuntimeError(
+            "[runtime.cpp:launch_kernel@572] Dispatch error : RhiResult(not_supported)"
+        )
+
+    monkeypatch.setattr(World, "advance_sampled", refused)
+    out = tmp_path / "sq.h5"
+    assert main(["run", TWO_SQUARES, "--out", str(out), "--until", "0.05", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if line.startswith("taichi-ice: error")]
+    assert len(errors) == 1 and "Traceback" not in err
+    assert "refused a kernel launch" in errors[0] and "--arch cpu" in errors[0]
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "failed"

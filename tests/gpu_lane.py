@@ -46,6 +46,7 @@ LANE = {
     ],
     "f32": [
         "tests/test_gpu.py",
+        "tests/test_fmath.py",
         "tests/test_contact.py",
         "tests/test_friction.py",
         "tests/test_engine.py",

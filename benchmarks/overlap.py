@@ -1,7 +1,7 @@
 """Overlap throughput: pairs per second of the NumPy reference and of the Taichi kernel.
 
 Seeded random convex pairs (3 to 8 vertices, about a third overlapping, the rest rejected by
-the SAT) go through ``geometry.overlap`` one by one and through ``batched.overlap_batch_ti``
+the SAT) go through ``polygon.overlap`` one by one and through ``batched.overlap_batch_ti``
 (``overlap_ti`` in one parallel kernel; it also writes the SAT outputs that the tests check)
 in batches of growing size. The Taichi timings exclude the first call, which compiles
 the kernel, and include the host-to-kernel copies of the ndarrays. Results go to
@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from taichi_ice import backend
-from taichi_ice.batched import overlap_batch_ti
-from taichi_ice.geometry import overlap, transform
+from taichi_ice.physics.batched import overlap_batch_ti
+from taichi_ice.physics.polygon import overlap, transform
 
 MAXV = 8  # padded vertex count, as in the DEM's local matrices
 

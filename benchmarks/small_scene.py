@@ -36,14 +36,15 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from taichi_ice import Simulation, backend, load_scenario
-    from taichi_ice.friction import parse_law
+    from taichi_ice.physics.friction_parse import parse_law
+    from taichi_ice.scene.parse import reseeded
 
     backend.init(args.arch, args.precision)
     base = load_scenario("pillar")
     rows = []
     for law in args.laws:
         for n in args.batch:
-            scenes = [base.reseeded(base.simulation.seed + k) for k in range(n)]
+            scenes = [reseeded(base, base.simulation.seed + k) for k in range(n)]
             sim = Simulation(
                 scenes, friction=parse_law(law), arch=args.arch, precision=args.precision
             )

@@ -4,7 +4,7 @@ Convex polygon floes collide through Hopkins (1992) overlap contacts; every cont
 the rate-and-state friction law of Lishman et al. (2013), doi:10.1016/j.coldregions.2013.03.004.
 The same Taichi kernels run on the CPU and on a GPU.
 
-    from taichi_ice.friction import RateState
+    from taichi_ice.physics.friction import RateState
     mu = RateState().respond(t, v)
 
     from taichi_ice import load_scenario, Simulation
@@ -58,15 +58,15 @@ __all__ = [
 def __getattr__(name: str) -> Any:
     # The engine imports Taichi, which is slow to start: load it only when asked for.
     if name == "load_scenario":
-        from .scenario import load_scenario
+        from .scene.parse import load_scenario
 
         return load_scenario
     if name == "open_run":
-        from .io import open_run
+        from .run.runfile_read import open_run
 
         return open_run
     if name == "Simulation":
-        from .simulation import Simulation
+        from .run.simulation import Simulation
 
         return Simulation
     raise AttributeError(f"module 'taichi_ice' has no attribute {name!r}")

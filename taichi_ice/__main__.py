@@ -1,5 +1,5 @@
 """``python -m taichi_ice`` is the ``taichi-ice`` command."""
 
-from .cli import main
+from .commands.cli import main
 
 raise SystemExit(main())

@@ -48,13 +48,31 @@ OPTIMIZE_ENV = "TAICHI_ICE_OPTIMIZE"
 _START_LINE = "[Taichi] Starting on arch="
 
 
-def real_dtype(precision: str):
-    """NumPy dtype that matches a precision name ('f64' or 'f32')."""
+# The element types of the engine's fields, by the names the state table (``schema``) and
+# ``precision`` use: one mapping to NumPy's and Taichi's types, here.
+DTYPES = ("f64", "f32", "i32", "i64")
+_NUMPY_TYPES = {"f64": "float64", "f32": "float32", "i32": "int32", "i64": "int64"}
+
+
+def numpy_dtype(name: str):
+    """The NumPy dtype of a type name of ``DTYPES`` ('f64', 'f32', 'i32', 'i64')."""
     import numpy as np
 
+    return np.dtype(_NUMPY_TYPES[name])
+
+
+def taichi_dtype(name: str):
+    """The Taichi type of a type name of ``DTYPES`` (imports Taichi)."""
+    import taichi as ti
+
+    return {"f64": ti.f64, "f32": ti.f32, "i32": ti.i32, "i64": ti.i64}[name]
+
+
+def real_dtype(precision: str):
+    """NumPy scalar type that matches a precision name ('f64' or 'f32')."""
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
-    return np.float64 if precision == "f64" else np.float32
+    return numpy_dtype(precision).type
 
 
 def current_arch():
@@ -69,7 +87,7 @@ def actual_arch() -> str | None:
 
 
 # Backends whose shading language has no float64 exp, log, sin or cos (SPIR-V's
-# GLSL.std.450, Metal's): the kernels take fdlibm's (``fmath``, ``geometry.rotation_ti``).
+# GLSL.std.450, Metal's): the kernels take fdlibm's (``fmath``, ``polygon_ti.rotation_ti``).
 SPIRV_ARCHES = ("vulkan", "metal", "opengl", "gles", "dx11")
 
 # Whether integer atomics inside a loop run right on the device: False on Mesa 22's
@@ -93,7 +111,7 @@ def loops_capped() -> bool:
 
 def float_gather() -> bool:
     """Whether contact forces are gathered in float64 holding whole quanta instead of
-    64-bit integers (``state.FORCE_QUANTUM``): only on a device whose integer atomics fail
+    64-bit integers (``schema.FORCE_QUANTUM``): only on a device whose integer atomics fail
     inside loops (``_integer_atomics_in_loops_work``). The sums are the same integers
     while a body's force stays below 2^53 quanta (5.4e8 N); read when a kernel compiles."""
     return _int_atomics_ok is False
@@ -324,7 +342,7 @@ def init(
     with _quiet_start():
         ti.init(
             arch=getattr(ti, arch),
-            default_fp=ti.f64 if precision == "f64" else ti.f32,
+            default_fp=taichi_dtype(precision),
             default_ip=ti.i32,
             log_level=ti.WARN,
             # Taichi's offline cache keys kernels by this setting (checked), so kernels

@@ -56,7 +56,7 @@ class ThetaMethod(_Labelled):
 
 
 class EnergyTerm(_Labelled):
-    """Columns of a world's energy table (J); see ``taichi_ice.budget``.
+    """Columns of a world's energy table (J); see ``taichi_ice.run.budget``.
 
     The first four accumulate over a run; ``KINETIC`` and ``ELASTIC`` are what the world
     holds now.
@@ -111,7 +111,7 @@ class Status(_Labelled):
 
 
 class OverlapKind(_Labelled):
-    """How the contact geometry of two polygons was found (``geometry.overlap``)."""
+    """How the contact geometry of two polygons was found (``polygon.overlap``)."""
 
     NONE = 0  # separated or touching: no contact, every other field is zero
     CHORD = 1  # the boundaries cross exactly twice: normal and width from that chord

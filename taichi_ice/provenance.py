@@ -1,11 +1,13 @@
 """Where a result came from: versions, git revision, command, host, and times, as attributes.
 
 Every run file carries these (``io.RunWriter``), so that a result found years later says
-which code, libraries and command made it, on which machine and when.
+which code, libraries and command made it, on which machine and when. The one place that
+asks git: the run files' ``git_revision`` and the benchmark's short ``git_describe``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import platform
 import shlex
@@ -37,29 +39,36 @@ def versions(extra: tuple[str, ...] = ()) -> dict[str, str]:
     return out
 
 
+def _git(*args: str) -> str | None:
+    """What ``git -C <the package's folder> ARGS`` prints, stripped; None when it fails, the
+    package is not a git checkout (an installed wheel) or git is missing."""
+    here = Path(__file__).resolve().parent
+    with contextlib.suppress(OSError, subprocess.SubprocessError):
+        return subprocess.run(
+            ["git", "-C", str(here), *args],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+    return None
+
+
 @lru_cache(maxsize=1)
 def git_revision() -> str:
     """The commit the package runs from (``+dirty`` if its tree has changes), or "" when it is
     not a git checkout (an installed wheel) or git is missing."""
-    here = Path(__file__).resolve().parent
-    try:
-        rev = subprocess.run(
-            ["git", "-C", str(here), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no", "."],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
+    rev = _git("rev-parse", "HEAD")
+    dirty = _git("status", "--porcelain", "--untracked-files=no", ".")
+    if rev is None or dirty is None:
         return ""
     return f"{rev}+dirty" if dirty else rev
+
+
+def git_describe() -> str | None:
+    """``git describe --always --dirty`` of the package's checkout (``c48739b-dirty``: what
+    ``taichi-ice bench`` records), or None when it is not one or git is missing."""
+    return _git("describe", "--always", "--dirty")
 
 
 def command() -> str:
@@ -78,4 +87,4 @@ def run_attributes() -> dict[str, str]:
     }
 
 
-__all__ = ["command", "git_revision", "now", "run_attributes", "versions"]
+__all__ = ["command", "git_describe", "git_revision", "now", "run_attributes", "versions"]

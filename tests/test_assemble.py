@@ -1,4 +1,5 @@
-"""Batch assembly (taichi_ice.assemble) and the energy budget (taichi_ice.budget), no kernels.
+"""Batch assembly (taichi_ice.engine.assemble) and the energy budget (taichi_ice.run.budget), no
+kernels.
 
 - A batch refuses worlds that disagree on what one set of kernels compiles in (ice, water,
   the state integrator: a batch mixing integrators once ran every world with the first
@@ -16,12 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_ice import budget
-from taichi_ice.assemble import MAX_VERTS_LIMIT, assemble
 from taichi_ice.codes import EnergyTerm, RestRule
+from taichi_ice.engine.assemble import MAX_VERTS_LIMIT, assemble
 from taichi_ice.errors import ScenarioError
-from taichi_ice.friction import Coulomb, MemoryOnly, RateState, SteadyState
-from taichi_ice.scenario import load_scenario, scene_from_dict
+from taichi_ice.physics.friction import Coulomb, MemoryOnly, RateState, SteadyState
+from taichi_ice.run import budget
+from taichi_ice.scene.parse import load_scenario, reseeded, scene_from_dict
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -76,7 +77,7 @@ def test_worlds_with_other_ice_are_refused(pushed):
 def test_a_world_has_the_same_columns_alone_and_in_a_batch(pushed):
     """The law columns of a world do not depend on its batch."""
     a = pushed.with_friction(RateState(t_c=2.0))
-    b = pushed.reseeded(7).with_friction(RateState(B=0.2))
+    b = reseeded(pushed, 7).with_friction(RateState(B=0.2))
     alone = assemble([b]).host
     batch = assemble([a, b]).host
     for name in ("world_B", "world_t_c", "world_memory", "world_rest_rule"):

@@ -17,15 +17,16 @@ import sys
 import pytest
 import taichi as ti
 
-from taichi_ice import backend, state
+from taichi_ice import backend
+from taichi_ice.engine import state
 
 _RUN = """
 import hashlib, sys
 from taichi.lang import impl
 from taichi_ice import backend, load_scenario
-from taichi_ice.bench.scenes import bench_scene
-from taichi_ice.friction import parse_law
-from taichi_ice.world import World
+from taichi_ice.experiments.bench.scenes import bench_scene
+from taichi_ice.physics.friction_parse import parse_law
+from taichi_ice.engine.world import World
 
 backend.init("cpu", "f64")
 print("ADVANCED", impl.current_cfg().advanced_optimization)

@@ -12,17 +12,19 @@ import pytest
 import shapely
 from shapely.geometry import Polygon
 
-from taichi_ice import bench, geometry
-from taichi_ice.bench import box2d, report
-from taichi_ice.bench.scenes import (
+from taichi_ice.codes import BodyEnergy, BodyKind
+from taichi_ice.commands import bench as cli_bench
+from taichi_ice.commands.cli import main
+from taichi_ice.experiments import bench
+from taichi_ice.experiments.bench import box2d, report
+from taichi_ice.experiments.bench.scenes import (
     BLOCK_LENGTH,
     BLOCK_WIDTH,
     RANDOM_AREA_FRACTION,
     random_box,
     random_scene,
 )
-from taichi_ice.cli import main
-from taichi_ice.codes import BodyEnergy, BodyKind
+from taichi_ice.physics import polygon
 
 # Shapely's intersection areas of polygons that only touch are round-off (m^2).
 TOUCH_AREA = 1e-12
@@ -49,8 +51,8 @@ DOCUMENTED = (
 
 
 def polygons(box) -> list[Polygon]:
-    outline = geometry.diamond(BLOCK_WIDTH, BLOCK_LENGTH)
-    return [Polygon(geometry.transform(outline, p, a)) for p, a in zip(box.positions, box.angles)]
+    outline = polygon.diamond(BLOCK_WIDTH, BLOCK_LENGTH)
+    return [Polygon(polygon.transform(outline, p, a)) for p, a in zip(box.positions, box.angles)]
 
 
 def test_cli_writes_csv_json_and_chart(tmp_path):
@@ -195,7 +197,7 @@ def test_ratios_and_the_box2d_run_shared_by_both_precisions(tmp_path, monkeypatc
     monkeypatch.setattr(bench, "_worker", worker)
     monkeypatch.setattr(report, "plot", lambda rows, meta, path: path.write_bytes(b""))
     parser = argparse.ArgumentParser()
-    bench.add_options(parser)
+    cli_bench.add_options(parser)
     args = parser.parse_args(["--sizes", "1e3", "--out", str(tmp_path)])
 
     monkeypatch.setattr(box2d, "version", lambda: "0.11.1")

@@ -4,7 +4,7 @@ A conservation law is the reference: what came in (the energy held at t = 0 and 
 the pusher) equals what is held (kinetic, elastic) plus what was dissipated (friction,
 dashpots, drag, crushing, and what contacts held when they ended), up to the residual of
 the explicit step. The contacts book their work at the velocity the bodies move with over
-the step (``contact.contact_work``), so the residual is the step's own error.
+the step (``contact_law.contact_work``), so the residual is the step's own error.
 """
 
 from __future__ import annotations
@@ -14,9 +14,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from taichi_ice import budget, load_scenario
-from taichi_ice.friction import Coulomb, MemoryOnly, RateState, SteadyState
-from taichi_ice.world import World
+from taichi_ice import load_scenario
+from taichi_ice.engine.world import World
+from taichi_ice.physics.friction import Coulomb, MemoryOnly, RateState, SteadyState
+from taichi_ice.run import budget
 
 LAWS = {
     "coulomb 0.1": Coulomb(0.1),

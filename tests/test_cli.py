@@ -8,8 +8,9 @@ import sys
 import h5py
 import pytest
 
-from taichi_ice.cli import main, parse_friction
-from taichi_ice.friction import Coulomb, RateState
+from taichi_ice.commands.args import parse_friction
+from taichi_ice.commands.cli import main
+from taichi_ice.physics.friction import Coulomb, RateState
 
 TWO_SQUARES = "scenarios/two_squares.toml"
 
@@ -86,7 +87,7 @@ def test_a_launch_the_gpu_driver_refuses_ends_in_one_line_and_a_failed_file(
     """Lavapipe refuses a launch of more than 65,535 workgroups (Taichi raises a bare
     RuntimeError, "Dispatch error"): one line that says why and what to use, exit 2, and the
     run file kept, marked failed. (The refusal is Taichi's own message, raised here.)"""
-    from taichi_ice.world import World
+    from taichi_ice.engine.world import World
 
     def refused(self, plan):
         raise RuntimeError(

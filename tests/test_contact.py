@@ -1,6 +1,6 @@
 """The contact stage: forces and memory against their NumPy twin, pairs against brute force.
 
-- ``reference.contact_force`` (overlap from ``geometry.overlap``, itself held against
+- ``reference_contact.contact_force`` (overlap from ``polygon.overlap``, itself held against
   shapely) against the kernel on seeded random overlapping pairs, new and remembered.
 - The spatial hash finds exactly the overlapping pairs of an all-pairs search, never across
   worlds of a batch.
@@ -17,21 +17,15 @@ import pytest
 
 from taichi_ice import CapacityError, Simulation, backend
 from taichi_ice.codes import BodyEnergy, OverlapKind, Status
-from taichi_ice.friction import Coulomb, RateState
-from taichi_ice.geometry import check_polygon, overlap, sat_separated, transform
-from taichi_ice.io import read_run
-from taichi_ice.reference import (
-    ContactMemory,
-    ReferenceModel,
-    ReferenceState,
-    contact_force,
-    outline,
-    owns,
-)
-from taichi_ice.scenario import scene_from_dict
-from taichi_ice.slip import NO_INTERFACE
-from taichi_ice.state import FORCE_QUANTUM
-from taichi_ice.world import World
+from taichi_ice.engine.reference import ReferenceModel, ReferenceState, outline, owns
+from taichi_ice.engine.reference_contact import ContactMemory, contact_force
+from taichi_ice.engine.schema import FORCE_QUANTUM
+from taichi_ice.engine.world import World
+from taichi_ice.physics.friction import Coulomb, RateState
+from taichi_ice.physics.polygon import check_polygon, overlap, sat_separated, transform
+from taichi_ice.physics.slip import NO_INTERFACE
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.parse import reseeded, scene_from_dict
 
 SEED = 20240612
 N_PAIRS = 160  # one two-body world each; four in five overlap
@@ -164,7 +158,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
     omega = np.asarray(d.body_omega.to_numpy(), dtype=np.float64)
     state = ReferenceState(pos=pos, angle=ang, vel=vel, omega=omega)
     # Each body's last velocity change, with which the contacts book their work at the
-    # mid-step velocity (``contact.contact_work``): random, as after a step.
+    # mid-step velocity (``contact_law.contact_work``): random, as after a step.
     dvel = rng.uniform(-0.05, 0.05, vel.shape)
     domega = rng.uniform(-0.05, 0.05, omega.shape)
     d.body_dvel.from_numpy(dvel)
@@ -326,7 +320,7 @@ def all_overlapping_pairs(outlines: list[np.ndarray], dynamic: np.ndarray) -> se
 def test_spatial_hash_finds_exactly_the_overlapping_pairs(f64):
     """The hash pairs exactly the bodies an all-pairs search finds, never across worlds."""
     base = scene_from_dict(dense_field_scene(0))
-    scenes = [base, base.reseeded(1)]
+    scenes = [base, reseeded(base, 1)]
     world = World(scenes)
     rng = np.random.default_rng(SEED)
     model = ReferenceModel.from_scenes(scenes)

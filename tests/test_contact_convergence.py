@@ -1,4 +1,4 @@
-"""Friction at a DEM contact converges as the step shrinks (``studies.contact_convergence``).
+"""Friction at a DEM contact converges as the step shrinks (``validation.contact_convergence``).
 
 Physical facts, each against a reference that does not share the contact code: the driven
 slider's frictional work converges at first order with the same slip starts at every dt
@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import pytest
 
-from taichi_ice.studies import contact_convergence as cc
+from taichi_ice.experiments.validation import contact_block as block
+from taichi_ice.experiments.validation import contact_convergence as cc
 
 # The slider converges at first order (order >= 0.9, the issue's bar; measured 1.0 to 1.6
 # over these steps) with the same number of slip starts at every dt.
@@ -41,7 +42,7 @@ def f64(taichi_runtime):
 def test_driven_slider_converges_at_first_order_with_the_same_slip_starts(f64):
     """The slider's frictional work over five halvings of dt converges at first order, and
     every dt counts the same slip starts, under each rate-and-state law."""
-    out = cc.slider_convergence(cc.RATE_STATE_LAWS, halvings=5, until=cc.DRIVER_PERIOD)
+    out = block.slider_convergence(block.RATE_STATE_LAWS, halvings=5, until=block.DRIVER_PERIOD)
     for name, s in out.items():
         works = ", ".join(f"{r['friction_work_J']:.3f}" for r in s["runs"])
         print(f"{name}: work {works} J; order {s['order']:.2f}; starts {s['starts']}")
@@ -55,13 +56,13 @@ def test_a_block_that_slid_holds_below_mu0_and_slides_above(f64):
     """Whatever speed it slid at (0.05-1 m/s), a block stopped by its friction holds a pull
     of 0.5 and 0.8 mu0 F_n (its base moves less than the stick spring's stretch allows) and
     slides under 1.2 mu0 F_n, under each rate-and-state law."""
-    out = cc.pull(cc.RATE_STATE_LAWS)
+    out = block.pull(block.RATE_STATE_LAWS)
     for name, cases in out["laws"].items():
         for c in cases:
             assert c["slid_m"] > 0.0, (name, c)  # it slid before it stopped
             assert c["held"] == (c["load"] < 1.0), (name, c)
             if not c["held"]:
-                assert c["moved_after_stop_m"] > 3 * cc.HOLD_DISTANCE, (name, c)
+                assert c["moved_after_stop_m"] > 3 * block.HOLD_DISTANCE, (name, c)
 
 
 def test_steady_sliding_on_a_moving_floor_gives_the_steady_state_friction(f64):
@@ -69,7 +70,7 @@ def test_steady_sliding_on_a_moving_floor_gives_the_steady_state_friction(f64):
     within 2 % (the paper's t_c = 3 s; memory-only: mu0); the steady-state law (t_c = 0.1 s)
     does where the stop is stiffer than the critical stiffness and sticks and slips where it
     is softer, as linear stability says."""
-    out = cc.steady(cc.RATE_STATE_LAWS)
+    out = block.steady(block.RATE_STATE_LAWS)
     judged = {"steady": 0, "unstable": 0}
     for name, cases in out["laws"].items():
         for c in cases:

@@ -16,8 +16,8 @@ import math
 
 import pytest
 
-from taichi_ice.cli import main
-from taichi_ice.studies import collision_ode, dem_accuracy, dem_scenes
+from taichi_ice.commands.cli import main
+from taichi_ice.experiments.validation import collision_ode, dem_accuracy, dem_scenes
 from taichi_ice.tomlio import dump_toml
 
 # DOP853 at rtol 1e-11 on the overlap geometry against the scalar ODE of the same oscillator:
@@ -132,7 +132,7 @@ def test_quick_study_runs_and_its_collisions_match_the_ode(tmp_path):
 def test_timing_runs_the_span_beyond_where_the_run_stopped():
     """``_timed`` times ``span`` more seconds: a run already past the span still steps
     (``Simulation.run`` takes the time to reach, not a duration)."""
-    from taichi_ice.simulation import Simulation
+    from taichi_ice.run.simulation import Simulation
 
     scene = dem_scenes.collision(dem_scenes.OFFSET, "coulomb")
     dt = dem_accuracy.DEFAULT_RATIO * scene.stable_dt

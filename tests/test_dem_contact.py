@@ -1,4 +1,4 @@
-"""The friction law through a DEM contact (``taichi_ice.studies.dem_contact``).
+"""The friction law through a DEM contact (``taichi_ice.experiments.validation.dem_contact``).
 
 A block on a kinematic floor whose speed steps from 0.1 to 1 mm/s: F_t / F_n on the block
 against the exact step response; and a block that slid to a stop, then loaded sideways at
@@ -14,9 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from taichi_ice.friction import RateState
-from taichi_ice.studies import dem_contact
-from taichi_ice.studies.single_interface import profiles
+from taichi_ice.experiments.validation import dem_contact
+from taichi_ice.experiments.validation.single_interface import profiles
+from taichi_ice.physics.friction import RateState
 
 # The step profile of Figure 3, shortened (jump at 2 s, 8 s in all), at 20 ms steps.
 STEP_DT = 0.02

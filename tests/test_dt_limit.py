@@ -22,12 +22,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_ice import Simulation, budget, load_scenario
-from taichi_ice.cli import main
+from taichi_ice import Simulation, load_scenario
 from taichi_ice.codes import EnergyTerm
+from taichi_ice.commands.cli import main
 from taichi_ice.errors import DivergenceError
-from taichi_ice.io import read_run
-from taichi_ice.scenario import scene_from_dict
+from taichi_ice.run import budget
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.parse import scene_from_dict
 from taichi_ice.tomlio import dump_toml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -222,7 +223,7 @@ def test_the_oscillator_limit_is_where_the_step_stops_being_stable(z):
     damped: stable at 0.999 x the limit, unstable at 1.001 x. Before, sqrt(1 + z^2) - z
     cancelled to 0 above z ~ 1e8 (issue 27, item 9: contact_viscosity = 1e30 gave a limit
     of 0)."""
-    from taichi_ice.timestep import oscillator_limit
+    from taichi_ice.physics.timestep import oscillator_limit
 
     k, m = 3e7, 40.0
     c = 2.0 * z * np.sqrt(k * m)

@@ -1,8 +1,8 @@
 """The DEM engine (World, Simulation) against references that share none of its code.
 
-- The NumPy twin of a whole step (``taichi_ice.reference``) on seeded random small scenes.
+- The NumPy twin of a whole step (``taichi_ice.engine.reference``) on seeded random small scenes.
 - Closed forms and SciPy: a face-on collision is a damped linear oscillator with a no-tension
-  clamp (scipy's ``solve_ivp``, in ``studies.collision_ode``); a block pressed onto a floor
+  clamp (scipy's ``solve_ivp``, in ``validation.collision_ode``); a block pressed onto a floor
   obeys Coulomb's law; a contact sliding at constant speed carries the rate-and-state
   steady state ``mu0 + (A - B) ln(V / V*)``.
 - Conservation and symmetry: momentum and angular momentum of a free field, an energy
@@ -21,29 +21,29 @@ import numpy as np
 import pytest
 
 from taichi_ice import DivergenceError, Simulation, StabilityError, backend, load_scenario
-from taichi_ice.bench.scenes import bench_scene
-from taichi_ice.budget import residual as energy_residual
 from taichi_ice.codes import EnergyTerm, Status
-from taichi_ice.energy import CONTACTS_COLUMN, STATUS_COLUMN
-from taichi_ice.errors import BackendError, CapacityError, UsageError
-from taichi_ice.friction import RateState
-from taichi_ice.geometry import diamond, rectangle, sat_separated, transform
-from taichi_ice.io import read_run
-from taichi_ice.reference import (
+from taichi_ice.engine.energy import CONTACTS_COLUMN, STATUS_COLUMN
+from taichi_ice.engine.reference import (
     ReferenceModel,
     ReferenceState,
     reference_energies,
     reference_step,
 )
-from taichi_ice.scenario import scene_from_dict
-from taichi_ice.studies.collision_ode import clamped_oscillator
-from taichi_ice.world import (
+from taichi_ice.engine.world import (
     FEW_WORLDS_MAX_BODIES,
     GPU_MIN_WORLDS,
     PER_WORLD_MAX_BODIES,
     World,
     auto_stepping,
 )
+from taichi_ice.errors import BackendError, CapacityError, UsageError
+from taichi_ice.experiments.bench.scenes import bench_scene
+from taichi_ice.experiments.validation.collision_ode import clamped_oscillator
+from taichi_ice.physics.friction import RateState
+from taichi_ice.physics.polygon import diamond, rectangle, sat_separated, transform
+from taichi_ice.run.budget import residual as energy_residual
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.parse import reseeded, scene_from_dict
 
 # The kernels and the NumPy twin do the same float64 operations in the same order; a force
 # that round-off moves across a 2^-24 N fixed-point step changes a velocity by
@@ -764,7 +764,7 @@ def test_sampled_advance_equals_stepping_and_reading_back(f64, name, plan):
         scenes = [scene_from_dict(cluster_scene_dict(seed, 3 + seed)) for seed in range(2)]
     else:
         base = load_scenario(name)
-        scenes = [base.reseeded(base.simulation.seed + k) for k in range(2)]
+        scenes = [reseeded(base, base.simulation.seed + k) for k in range(2)]
     got = {}
     for stepping in ("worlds", "bodies"):
         world = World(scenes, stepping=stepping)

@@ -1,4 +1,4 @@
-"""The exact solutions in ``taichi_ice.exact`` against independent references.
+"""The exact solutions in ``taichi_ice.physics.exact`` against independent references.
 
 SciPy (a test-only dependency) supplies them: ``scipy.special.expi`` for Ei and
 ``scipy.integrate.solve_ivp`` at tight tolerances for the state equation itself.
@@ -14,8 +14,8 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.special import expi
 
-from taichi_ice import exact
-from taichi_ice.friction import RateState
+from taichi_ice.physics import exact
+from taichi_ice.physics.friction import RateState
 
 # Ei by series / asymptotic series / continued fraction: a few ulps, up to the ~1e-14
 # relative accuracy of expi(z) e^{-z} itself for z in the hundreds.

@@ -18,11 +18,12 @@ import pytest
 import shapely
 from shapely import affinity
 
-from taichi_ice.cli import main
+from taichi_ice.commands.cli import main
 from taichi_ice.errors import OutputError
-from taichi_ice.export import export_vtk
-from taichi_ice.io import RunWriter, read_run
-from taichi_ice.scenario import load_scenario
+from taichi_ice.run.export import export_vtk
+from taichi_ice.run.runfile import RunWriter
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.parse import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 PILLAR = ROOT / "scenarios" / "pillar.toml"

@@ -22,11 +22,12 @@ import numpy as np
 import pytest
 
 from taichi_ice import Simulation, load_scenario
-from taichi_ice import checkpoint as ckpt
-from taichi_ice.cli import main
+from taichi_ice.commands.cli import main
+from taichi_ice.engine.world import World
 from taichi_ice.errors import RunFileError
-from taichi_ice.io import DiskFullError, read_run
-from taichi_ice.world import World
+from taichi_ice.run import checkpoint as ckpt
+from taichi_ice.run.runfile import DiskFullError
+from taichi_ice.run.runfile_read import read_run
 
 ROOT = Path(__file__).resolve().parents[1]
 TWO_SQUARES = str(ROOT / "scenarios" / "two_squares.toml")
@@ -178,7 +179,7 @@ def test_a_full_disk_stops_the_run_with_its_file_whole_and_resume_finishes_it(
     once there is room ``resume`` finishes it equal to a run never stopped."""
     import shutil as real_shutil
 
-    import taichi_ice.io as runio
+    import taichi_ice.run.runfile as runio
 
     whole = run(scene, tmp_path / "whole.h5", 0.1)
     usage = real_shutil.disk_usage
@@ -240,7 +241,7 @@ def test_a_run_on_a_real_full_file_system_stops_cleanly(scene, tmp_path):
 def head_on(speed: float):
     import copy
 
-    from taichi_ice.scenario import scene_from_dict
+    from taichi_ice.scene.parse import scene_from_dict
 
     raw = copy.deepcopy(dict(load_scenario(TWO_SQUARES).raw))
     raw["body"][0]["velocity"] = [speed, 0.0]
@@ -252,7 +253,7 @@ def test_blocks_fast_enough_to_pass_through_each_other_are_refused_up_front(monk
     """Two 1 m squares head-on: at 1,000 m/s each they pass through each other (the run
     used to end "complete", each square on the other's side); now the scene is refused,
     naming the body and the speed the contact resolves. At 100 m/s they bounce back."""
-    import taichi_ice.simulation as simulation
+    import taichi_ice.run.simulation as simulation
     from taichi_ice.errors import StabilityError
 
     with pytest.raises(StabilityError, match="pass through each other"):
@@ -262,7 +263,7 @@ def test_blocks_fast_enough_to_pass_through_each_other_are_refused_up_front(monk
     x = slow.positions()[:, 0]
     assert x[0] < -1.0 and x[1] > 1.0  # bounced: each back on its own side
     # What the refusal prevents: the same collision, the check off.
-    monkeypatch.setattr(simulation, "_check_approach", lambda scene: None)
+    monkeypatch.setattr(simulation, "check_approach", lambda scene: None)
     fast = Simulation(head_on(1000.0))
     fast.run(until=0.02)
     x = fast.positions()[:, 0]
@@ -288,7 +289,7 @@ def test_a_disk_that_fills_before_the_last_write_fails_the_run_it_does_not_pass(
     marked failed (not complete) and whole, and the run raises, not returns."""
     import shutil as real_shutil
 
-    import taichi_ice.io as runio
+    import taichi_ice.run.runfile as runio
 
     usage = real_shutil.disk_usage
     calls = {"n": 0}
@@ -358,7 +359,7 @@ def test_a_body_name_with_a_nul_is_refused_before_a_file_is_made(tmp_path, capsy
 
 def test_plotting_a_run_with_no_rows_yet_is_one_line_and_makes_nothing(scene, tmp_path, capsys):
     """A run killed before its first write: plot used to raise IndexError."""
-    from taichi_ice.io import RunWriter
+    from taichi_ice.run.runfile import RunWriter
 
     path = tmp_path / "empty.h5"
     RunWriter(path, scene, {})  # created, never written to
@@ -399,7 +400,7 @@ def test_a_full_disk_refuses_an_overwrite_with_the_old_file_still_whole(
 ):
     import shutil as real_shutil
 
-    import taichi_ice.io as runio
+    import taichi_ice.run.runfile as runio
 
     path = tmp_path / "old.h5"
     run(scene, path, 0.02)
@@ -417,7 +418,7 @@ def test_a_full_disk_refuses_an_overwrite_with_the_old_file_still_whole(
 def test_resuming_with_another_friction_law_names_the_law(scene, tmp_path):
     """A checkpoint of a Coulomb run resumed with rate-and-state used to be reported as
     "its scene differs"."""
-    from taichi_ice.friction import RateState
+    from taichi_ice.physics.friction import RateState
 
     path = tmp_path / "law.h5"
     run(scene, path, 0.04, checkpoint_every=0)

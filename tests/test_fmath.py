@@ -1,5 +1,5 @@
 """float64 exp and log of our own, for the backends whose shading language has none
-(taichi_ice/fmath.py, issue 28): the Taichi functions equal their NumPy twins bit for bit on
+(taichi_ice/physics/fmath.py, issue 28): the Taichi functions equal their NumPy twins bit for bit on
 seeded arguments, and the twins are within 1 ulp of NumPy's own exp and log (an independent
 libm) over the ranges the friction laws use and beyond, special values included."""
 
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from taichi_ice import backend, fmath
+from taichi_ice import backend
+from taichi_ice.physics import fmath, fmath_ti
 
 RNG = np.random.default_rng(20261126)
 ARGS = np.concatenate(
@@ -43,8 +44,8 @@ def on_taichi(taichi_runtime):
     @ti.kernel
     def run():
         for i in range(n):
-            e[i] = fmath.exp_ti(x[i])
-            lg[i] = fmath.log_ti(x[i])
+            e[i] = fmath_ti.exp_ti(x[i])
+            lg[i] = fmath_ti.log_ti(x[i])
 
     run()
     return e.to_numpy(), lg.to_numpy()

@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from taichi_ice import StabilityError, backend, batched, exact, friction
-from taichi_ice.batched import respond_batch, respond_batch_ti
+from taichi_ice import StabilityError, backend
 from taichi_ice.codes import ThetaMethod
-from taichi_ice.friction import (
+from taichi_ice.physics import batched, exact, friction, friction_parse, friction_ti
+from taichi_ice.physics.batched import respond_batch, respond_batch_ti
+from taichi_ice.physics.friction import (
     EULER_STABILITY_LIMIT,
     RK4_STABILITY_LIMIT,
     Coulomb,
@@ -463,15 +464,15 @@ def _step_each(
     inputs: ti.types.ndarray(ndim=2), out: ti.types.ndarray(ndim=2), method: ti.template()
 ):
     for i in range(inputs.shape[0]):
-        x_start = friction.slip_log_ti(inputs[i, 1], inputs[i, 7])
-        x_mid = friction.slip_log_ti(inputs[i, 2], inputs[i, 7])
-        x_end = friction.slip_log_ti(inputs[i, 3], inputs[i, 7])
-        theta = friction.theta_step_ti(
+        x_start = friction_ti.slip_log_ti(inputs[i, 1], inputs[i, 7])
+        x_mid = friction_ti.slip_log_ti(inputs[i, 2], inputs[i, 7])
+        x_end = friction_ti.slip_log_ti(inputs[i, 3], inputs[i, 7])
+        theta = friction_ti.theta_step_ti(
             inputs[i, 0], x_start, x_mid, x_end, inputs[i, 4], inputs[i, 5], inputs[i, 6], method
         )
         out[i, 0] = theta
-        out[i, 1] = friction.rate_state_mu_ti(theta, x_end, inputs[i, 8], inputs[i, 9])
-        out[i, 2] = friction.theta_equilibrium_ti(x_end, inputs[i, 5])
+        out[i, 1] = friction_ti.rate_state_mu_ti(theta, x_end, inputs[i, 8], inputs[i, 9])
+        out[i, 2] = friction_ti.theta_equilibrium_ti(x_end, inputs[i, 5])
 
 
 @pytest.mark.parametrize("method", ALL_METHODS)
@@ -506,8 +507,8 @@ F32_SCRIPT = textwrap.dedent(
     """
     import numpy as np
     from taichi_ice import backend
-    from taichi_ice.batched import respond_batch, respond_batch_ti
-    from taichi_ice.friction import RateState
+    from taichi_ice.physics.batched import respond_batch, respond_batch_ti
+    from taichi_ice.physics.friction import RateState
 
     rng = np.random.default_rng(2)
     t = np.cumsum(rng.uniform(0.01, 1.0, 200))
@@ -561,15 +562,15 @@ SOME_LAWS = [
 @pytest.mark.parametrize("law", SOME_LAWS, ids=repr)
 def test_every_written_form_reads_back_the_same_law(law):
     """to_dict -> law_from_table and the command-line form -> parse_law give the law back."""
-    assert friction.law_from_table(law.to_dict()) == law
+    assert friction_parse.law_from_table(law.to_dict()) == law
     text = f"{law.name}:" + ",".join(f"{k}={v}" for k, v in law.to_dict().items() if k != "law")
-    assert friction.parse_law(text) == law
+    assert friction_parse.parse_law(text) == law
 
 
 def test_parameters_are_declared_once_with_units():
     """Each law lists its parameters with the paper's defaults, units and meaning; the batch
     model has one column per parameter."""
-    from taichi_ice import schema
+    from taichi_ice.engine import schema
 
     names = {p.name: p for p in RateState.parameters()}
     assert list(names) == ["A", "B", "mu0", "v_star", "t_c"]
@@ -594,14 +595,14 @@ def test_parameters_are_declared_once_with_units():
 def test_bad_law_text_names_the_key(text, key, message):
     """A mistake in a law's text names the key and says what is wrong."""
     with pytest.raises(friction.LawError, match=message) as info:
-        friction.parse_law(text)
+        friction_parse.parse_law(text)
     assert info.value.key == key
 
 
 def test_scene_tables_are_strict_where_the_command_line_is_lenient():
     """The command line takes 'rs' and 'RATE-STATE'; a scene file must spell the name."""
-    assert friction.parse_law("RS:t_c=2") == RateState(t_c=2.0)
+    assert friction_parse.parse_law("RS:t_c=2") == RateState(t_c=2.0)
     with pytest.raises(friction.LawError, match='did you mean "rate-state"'):
-        friction.law_from_table({"law": "rate_state"})
+        friction_parse.law_from_table({"law": "rate_state"})
     with pytest.raises(friction.LawError, match="remove the quotes"):
-        friction.law_from_table({"law": "coulomb", "mu": "0.3"})
+        friction_parse.law_from_table({"law": "coulomb", "mu": "0.3"})

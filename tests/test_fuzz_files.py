@@ -24,11 +24,11 @@ from hypothesis import strategies as st
 from test_fuzz_scenes import leaves  # every table entry and array item
 
 from taichi_ice import Simulation, load_scenario
-from taichi_ice import checkpoint as ckpt
-from taichi_ice.cli import main
+from taichi_ice.commands.cli import main
 from taichi_ice.errors import TaichiIceError
-from taichi_ice.io import read_run
-from taichi_ice.sweep import parse_sweep
+from taichi_ice.experiments.sweep.spec import parse_sweep
+from taichi_ice.run import checkpoint as ckpt
+from taichi_ice.run.runfile_read import read_run
 from taichi_ice.tomlio import dump_toml
 
 ROOT = Path(__file__).resolve().parents[1]

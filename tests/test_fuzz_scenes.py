@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from taichi_ice.cli import main
+from taichi_ice.commands.cli import main
 from taichi_ice.errors import TaichiIceError
-from taichi_ice.scenario import load_scenario, scene_from_dict
-from taichi_ice.scene import Scene
+from taichi_ice.scene.model import Scene
+from taichi_ice.scene.parse import load_scenario, scene_from_dict
 from taichi_ice.tomlio import dump_toml
 
 ROOT = Path(__file__).resolve().parents[1]

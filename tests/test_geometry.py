@@ -1,6 +1,6 @@
 """Polygon geometry: overlap, clipping, SAT and mass properties against shapely and symmetry.
 
-Shapely (GEOS) is the independent reference: it shares no code with ``taichi_ice.geometry``.
+Shapely (GEOS) is the independent reference: it shares no code with ``taichi_ice.physics.polygon``.
 The Taichi functions are held against the NumPy reference on the same seeded random pairs.
 """
 
@@ -9,10 +9,10 @@ import pytest
 import shapely
 from shapely.geometry import MultiPoint, Point, Polygon
 
-from taichi_ice.batched import overlap_batch_ti, rotation_batch_ti
 from taichi_ice.codes import OverlapKind
 from taichi_ice.errors import PolygonError
-from taichi_ice.geometry import (
+from taichi_ice.physics.batched import overlap_batch_ti, rotation_batch_ti
+from taichi_ice.physics.polygon import (
     check_polygon,
     diamond,
     facing_gap,
@@ -583,3 +583,14 @@ def test_the_portable_rotation_of_far_angles_is_within_their_own_round_off():
     bound = 2.3e-16 + 2.0 * np.abs(x) * np.finfo(np.float64).eps
     assert np.all(np.abs(c - np.cos(x)) <= bound)
     assert np.all(np.abs(s - np.sin(x)) <= bound)
+
+
+def test_geometry_still_names_the_polygon_functions_and_their_twins():
+    """``taichi_ice.geometry`` (README's public name) re-exports ``polygon`` and ``polygon_ti``."""
+    from taichi_ice import geometry
+    from taichi_ice.physics import polygon, polygon_ti
+
+    assert geometry.overlap is polygon.overlap
+    assert geometry.check_polygon is polygon.check_polygon
+    assert geometry.overlap_ti is polygon_ti.overlap_ti
+    assert geometry.rotation_ti is polygon_ti.rotation_ti

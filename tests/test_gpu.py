@@ -29,8 +29,8 @@ import numpy as np
 import pytest
 
 from taichi_ice import Simulation, load_scenario
-from taichi_ice.friction import Coulomb, RateState
-from taichi_ice.scenario import scene_from_dict
+from taichi_ice.physics.friction import Coulomb, RateState
+from taichi_ice.scene.parse import reseeded, scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -51,7 +51,7 @@ CHILD = """
 import json, sys
 import numpy as np
 from taichi_ice import Simulation, backend, load_scenario
-from taichi_ice.friction import Coulomb, RateState
+from taichi_ice.physics.friction import Coulomb, RateState
 name, law, until, precision = sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4]
 backend.init("cpu", precision)
 friction = Coulomb(mu=0.5) if law == "coulomb" else RateState()
@@ -140,7 +140,7 @@ def test_a_batch_on_the_gpu_equals_each_layout_alone(stepping, gpu):
     worlds do not touch each other, whichever way the GPU steps them."""
     arch, precision = gpu
     base = load_scenario("pillar")
-    scenes = [base.reseeded(base.simulation.seed + k) for k in range(3)]
+    scenes = [reseeded(base, base.simulation.seed + k) for k in range(3)]
     batch = Simulation(scenes, arch=arch, precision=precision, stepping=stepping)
     batch.run(until=0.3)
     pos = batch.world.positions()
@@ -172,7 +172,7 @@ def test_every_field_of_a_world_holds_its_own_values(name, taichi_runtime):
     64-bit field beside it (4 of a World's 33 fields on Vulkan, before ``state.Fields`` laid
     them out 64-bit first with pads; with 3 bodies in float32, 4 fields still did, until
     64-bit and 32-bit fields had trees of their own there)."""
-    from taichi_ice.world import World
+    from taichi_ice.engine.world import World
 
     arch, precision = taichi_runtime
     scene = scene_from_dict(THREE_BODIES) if name == "three_bodies" else load_scenario(name)

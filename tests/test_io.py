@@ -13,9 +13,11 @@ import h5py
 import numpy as np
 import pytest
 
-from taichi_ice import Simulation, __version__, load_scenario, simulation
-from taichi_ice.io import RunWriter, read_run
-from taichi_ice.scenario import scene_from_dict
+from taichi_ice import Simulation, __version__, load_scenario
+from taichi_ice.run import simulation
+from taichi_ice.run.runfile import RunWriter
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.parse import scene_from_dict
 
 SERIES = {
     "time",
@@ -180,7 +182,7 @@ def test_probe_force_is_the_contact_force_on_the_probe(finished, run_opts):
 
 READER = """
 import json, sys
-from taichi_ice.io import read_run
+from taichi_ice.run.runfile_read import read_run
 run = read_run(sys.argv[1])
 print(json.dumps({"status": run["attrs"]["status"], "frames": len(run["frames"]["time"]),
                   "samples": len(run["series"]["time"]),

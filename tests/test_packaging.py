@@ -248,7 +248,8 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_wheel_contents(wheel: Path) -> None:
     """The wheel holds the scenes and the version module; its metadata admits Python 3.9."""
-    from taichi_ice import __version__, scenario
+    from taichi_ice import __version__
+    from taichi_ice.scene import parse as scenario
 
     with zipfile.ZipFile(wheel) as z:
         names = set(z.namelist())

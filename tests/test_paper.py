@@ -17,12 +17,14 @@ import numpy as np
 import pytest
 
 from taichi_ice import Simulation, load_scenario
-from taichi_ice.budget import SERIES as SERIES_ENERGY
-from taichi_ice.budget import residual as energy_residual
-from taichi_ice.cli import main
-from taichi_ice.ensemble import concentration, run_ensemble, run_metrics
-from taichi_ice.friction import Coulomb, RateState
-from taichi_ice.io import read_run
+from taichi_ice.commands.cli import main
+from taichi_ice.experiments.ensemble import run_ensemble
+from taichi_ice.experiments.metrics import concentration, run_metrics
+from taichi_ice.physics.friction import Coulomb, RateState
+from taichi_ice.run.budget import SERIES as SERIES_ENERGY
+from taichi_ice.run.budget import residual as energy_residual
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.parse import reseeded
 
 ROOT = Path(__file__).resolve().parents[1]
 PILLAR = ROOT / "scenarios" / "pillar.toml"
@@ -142,7 +144,7 @@ def test_batched_layouts_equal_each_layout_alone(pillar, run_opts):
     assert len(ens.series) == 3
     for k, seed in enumerate([0, 9]):
         world = 0 if seed == 0 else 2
-        alone = Simulation(pillar.reseeded(seed), friction=Coulomb(0.5), **run_opts)
+        alone = Simulation(reseeded(pillar, seed), friction=Coulomb(0.5), **run_opts)
         s = alone.run(until=until).series[0]
         for name in ("time", "probe_force", *SERIES_ENERGY):
             np.testing.assert_array_equal(ens.series[world][name], s[name], err_msg=name)

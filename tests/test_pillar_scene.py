@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from taichi_ice import load_scenario
-from taichi_ice.scenario import Scene
+from taichi_ice.scene.parse import Scene, reseeded
 
 PATH = Path(__file__).resolve().parents[1] / "scenarios" / "pillar.toml"
 
@@ -103,5 +103,5 @@ def test_runs_for_20_s(scene: Scene) -> None:
 def test_other_seeds_load(scene: Scene) -> None:
     """Reseeded jitter (the paper: results depend on initial conditions) still loads."""
     for seed in (1, 2, 3):
-        other = scene.reseeded(seed)
+        other = reseeded(scene, seed)
         assert other.n_bodies == scene.n_bodies

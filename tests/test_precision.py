@@ -20,7 +20,7 @@ CHILD = """
 import json, sys
 import numpy as np
 from taichi_ice import backend, load_scenario
-from taichi_ice.world import World
+from taichi_ice.engine.world import World
 precision, offset = sys.argv[1], float(sys.argv[2])
 backend.init("cpu", precision)
 world = World([load_scenario("free_field")], precision=precision)

@@ -13,12 +13,13 @@ import numpy as np
 import pytest
 
 from taichi_ice import Simulation, load_scenario
-from taichi_ice import checkpoint as ckpt
-from taichi_ice.cli import main
+from taichi_ice.commands.cli import main
 from taichi_ice.errors import RunFileError
-from taichi_ice.io import RunWriter, read_run
-from taichi_ice.scenario import scene_from_dict
-from taichi_ice.slip import NO_INTERFACE
+from taichi_ice.physics.slip import NO_INTERFACE
+from taichi_ice.run import checkpoint as ckpt
+from taichi_ice.run.runfile import RunWriter
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.parse import scene_from_dict
 from taichi_ice.tomlio import dump_toml
 
 UNTIL = 0.3  # s
@@ -150,7 +151,7 @@ def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp
 
 def jam_file(tmp_path):
     """The jam as a scene file, with two loose squares drifting at jittered speeds beside it:
-    every seed is another world (``Scene.reseeded``), the jam in each."""
+    every seed is another world (``scenario.reseeded``), the jam in each."""
     raw = copy.deepcopy(dict(jam().raw))
     raw["field"] = [
         {
@@ -263,7 +264,7 @@ def test_a_resumed_paper_run_skips_the_parts_finished(tmp_path, monkeypatch, cap
     """`taichi-ice paper` (a small scene, 0.1 s, the four models) killed in its third model:
     the resume neither redraws Figure 3 nor reruns the two models finished, continues the
     third from its checkpoint and runs the fourth; the summary holds all four."""
-    from taichi_ice.studies import single_interface
+    from taichi_ice.experiments.validation import single_interface
 
     scene = jam_file(tmp_path)
     out = tmp_path / "paper"

@@ -25,7 +25,8 @@ import pytest
 import shapely
 
 from taichi_ice import Simulation, load_scenario
-from taichi_ice.cli import main, parse_duration
+from taichi_ice.commands.args import parse_duration
+from taichi_ice.commands.cli import main
 from taichi_ice.errors import (
     PolygonError,
     ScenarioError,
@@ -33,10 +34,10 @@ from taichi_ice.errors import (
     StabilityError,
     UsageError,
 )
-from taichi_ice.geometry import check_polygon
-from taichi_ice.io import read_run
-from taichi_ice.scenario import scene_from_dict
-from taichi_ice.scene import MAX_VERTICES
+from taichi_ice.physics.polygon import check_polygon
+from taichi_ice.run.runfile_read import read_run
+from taichi_ice.scene.model import MAX_VERTICES
+from taichi_ice.scene.parse import scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 TWO_SQUARES = str(ROOT / "scenarios" / "two_squares.toml")
@@ -86,7 +87,7 @@ def test_bad_output_paths_are_refused_before_any_work(tmp_path, capsys, monkeypa
     def never(*args, **kwargs):
         raise AssertionError("the scene was read before the output was checked")
 
-    monkeypatch.setattr("taichi_ice.scenario.load_scenario", never)
+    monkeypatch.setattr("taichi_ice.scene.parse.load_scenario", never)
     if case == "folder":
         out, expect = tmp_path, "is a folder"
     elif case == "below a file":
@@ -110,7 +111,7 @@ def test_an_output_folder_that_is_a_file_is_one_line_before_any_work(
     def never(*args, **kwargs):
         raise AssertionError("the scene was read before the output folder was checked")
 
-    monkeypatch.setattr("taichi_ice.scenario.load_scenario", never)
+    monkeypatch.setattr("taichi_ice.scene.parse.load_scenario", never)
     (tmp_path / "f").write_text("kept")
     out = tmp_path / "f" if case == "a file" else tmp_path / "f" / "results"
     args = [command, TWO_SQUARES] if command == "ensemble" else [command]

@@ -18,12 +18,13 @@ import pytest
 from shapely import affinity
 from shapely.geometry import Polygon
 
-from taichi_ice import geometry
-from taichi_ice import scenario as sc
 from taichi_ice.codes import BodyKind
 from taichi_ice.errors import ScenarioError
-from taichi_ice.friction import Coulomb, RateState
-from taichi_ice.timestep import DEFAULT_SAFETY
+from taichi_ice.physics import polygon
+from taichi_ice.physics.friction import Coulomb, RateState
+from taichi_ice.physics.timestep import DEFAULT_SAFETY
+from taichi_ice.scene import parse as sc
+from taichi_ice.scene import tables
 
 ROOT = Path(__file__).resolve().parents[1]
 # scenarios/ is a link to the scenes shipped in the package.
@@ -500,7 +501,7 @@ def test_find_overlaps_matches_brute_force() -> None:
     bodies = []
     for i in range(300):
         w, l = rng.uniform(0.2, 1.0, 2)
-        outline = geometry.rectangle(w, l) if i % 2 else geometry.diamond(w, l)
+        outline = polygon.rectangle(w, l) if i % 2 else polygon.diamond(w, l)
         bodies.append(
             sc.Body(
                 name=f"b{i}",
@@ -511,7 +512,7 @@ def test_find_overlaps_matches_brute_force() -> None:
                 angle=rng.uniform(0, np.pi),
             )
         )
-    wall = geometry.rectangle(40.0, 0.3)
+    wall = polygon.rectangle(40.0, 0.3)
     bodies.append(
         sc.Body(
             name="wall",
@@ -594,12 +595,12 @@ def test_field_velocity_jitter() -> None:
 
 
 def test_reseeded_changes_only_jitter() -> None:
-    """reseeded() moves field blocks within their jitter and leaves everything else as it was."""
+    """reseeded moves field blocks within their jitter and leaves everything else as it was."""
     data = base_dict()
     data["water"] = {"form_drag": 0.8}
     data["field"] = [field_dict(origin=[10.0, 10.0], jitter=0.05, velocity_jitter=0.1)["field"][0]]
     scene = sc.scene_from_dict(data)
-    other = scene.reseeded(11)
+    other = sc.reseeded(scene, 11)
     assert other.simulation == dataclasses_replace(scene.simulation, seed=11)
     assert (other.ice, other.water, other.friction, other.names) == (
         scene.ice,
@@ -616,7 +617,7 @@ def test_reseeded_changes_only_jitter() -> None:
     assert np.all(np.abs(other.positions[2:] - lattice) <= 0.05)
     np.testing.assert_array_equal(other.masses, scene.masses)
     np.testing.assert_array_equal(other.inertias, scene.inertias)
-    assert scene.reseeded(scene.simulation.seed) is scene
+    assert sc.reseeded(scene, scene.simulation.seed) is scene
     # Its text rebuilds it exactly.
     again = sc.parse_scenario(other.text)
     np.testing.assert_array_equal(again.positions, other.positions)
@@ -708,7 +709,7 @@ def test_generated_text_round_trip_every_table() -> None:
     assert_same_scene(again, scene)
     assert again.text == scene.text == sc.dump_toml(again.raw)
     # Reseeding and a new law regenerate the text; it rebuilds those scenes too.
-    for other in (scene.reseeded(9), scene.with_friction(Coulomb(0.3))):
+    for other in (sc.reseeded(scene, 9), scene.with_friction(Coulomb(0.3))):
         assert_same_scene(sc.parse_scenario(other.text), other)
 
 
@@ -874,12 +875,12 @@ def test_examples_present() -> None:
 
 
 def test_loading_does_not_start_taichi() -> None:
-    """Importing taichi_ice.scenario and loading a scene leave Taichi unstarted."""
+    """Importing taichi_ice.scene.parse and loading a scene leave Taichi unstarted."""
     code = textwrap.dedent(
         f"""
-        from taichi_ice.scenario import load_scenario
+        from taichi_ice.scene.parse import load_scenario, reseeded
         scene = load_scenario({str(ROOT / "scenarios" / "pushed_field.toml")!r})
-        scene.masses, scene.dt, scene.reseeded(5)
+        scene.masses, scene.dt, reseeded(scene, 5)
         from taichi.lang import impl
         from taichi_ice import backend
         assert impl.get_runtime().prog is None, "Taichi was started"
@@ -902,12 +903,12 @@ def test_documented_example_loads() -> None:
     assert scene.n_bodies == 3 + 9 * 7
     assert isinstance(scene.friction, RateState) and scene.water is not None
     for table, keys in [
-        ("simulation", sc._SIMULATION_KEYS),
-        ("ice", sc._ICE_KEYS),
-        ("water", sc._WATER_KEYS),
+        ("simulation", tables.SIMULATION_KEYS),
+        ("ice", tables.ICE_KEYS),
+        ("water", tables.WATER_KEYS),
         ("friction", ("law", *RateState.keys())),
     ]:
         assert set(scene.raw[table]) == set(keys), table
-    assert set().union(*scene.raw["body"]) == set(sc._BODY_KEYS)
+    assert set().union(*scene.raw["body"]) == set(tables.BODY_KEYS)
     # A field takes vertices (polygon) or width and length, not both.
-    assert set(scene.raw["field"][0]) == set(sc._FIELD_KEYS) - {"vertices"}
+    assert set(scene.raw["field"][0]) == set(tables.FIELD_KEYS) - {"vertices"}

@@ -1,4 +1,4 @@
-"""The state's one declaration (taichi_ice.schema) against what uses it.
+"""The state's one declaration (taichi_ice.engine.schema) against what uses it.
 
 - Every stage's kernels touch exactly the fields their ACCESS declares (parsed from the
   kernel source), so the traffic model and a reader see what the code does.
@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from taichi_ice import schema
-from taichi_ice.assemble import assemble
-from taichi_ice.scenario import load_scenario
-from taichi_ice.state import ti_dtype
-from taichi_ice.world import STAGES, World
+from taichi_ice.engine import schema, stages
+from taichi_ice.engine.assemble import assemble
+from taichi_ice.engine.state import ti_dtype
+from taichi_ice.engine.world import STAGES, World
+from taichi_ice.scene.parse import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_stage_declares_exactly_the_fields_its_kernel_touches(stage, kernel):
     """reads and writes of each kernel (and the methods it calls) equal its declaration."""
     cls = STAGES[stage]
-    reads, writes = schema.fields_touched(cls, kernel)
+    reads, writes = stages.fields_touched(cls, kernel)
     access = cls.ACCESS[kernel]
     assert reads == set(access.reads), (stage, kernel, reads ^ set(access.reads))
     assert writes == set(access.writes), (stage, kernel, writes ^ set(access.writes))
@@ -42,7 +42,7 @@ def test_fields_touched_tells_reads_from_writes():
     """A plain assignment writes, an augmented one and an atomic read and write, an index
     inside a target is read."""
 
-    class Probe(schema.Stage):
+    class Probe(stages.Stage):
         def kernel(self):
             d = self.data
             d.body_pos[0] = d.body_vel[1]
@@ -53,7 +53,7 @@ def test_fields_touched_tells_reads_from_writes():
         def helper(self):
             self.data.status[0] = self.data.time_step[None]
 
-    reads, writes = schema.fields_touched(Probe, "kernel")
+    reads, writes = stages.fields_touched(Probe, "kernel")
     assert writes == {"body_pos", "body_angle", "sorted_ids", "bucket_end", "status"}
     assert reads == {"body_vel", "body_angle", "block_total", "bucket_end", "time_step"}
 
@@ -105,7 +105,9 @@ def test_host_arrays_of_the_wrong_shape_are_refused():
 def test_docs_state_table_is_generated_from_the_schema():
     """docs/state.md is exactly schema.markdown_table() (regenerate it when this fails)."""
     text = (ROOT / "docs" / "state.md").read_text()
-    assert text == schema.markdown_table(), "run: python -m taichi_ice.schema > docs/state.md"
+    assert text == schema.markdown_table(), (
+        "run: python -m taichi_ice.engine.schema > docs/state.md"
+    )
 
 
 def test_traffic_model_counts_the_integrator_by_hand():
@@ -128,5 +130,5 @@ def test_traffic_model_counts_the_integrator_by_hand():
     # the contacts book their work with (dvel 2 x f64, domega); the rotation (cos, sin);
     # the path; status (4 x i32); the stale flags (one world, and the batch's).
     writes = n * (16 + 8 + 16 + 8 + 16 + 8 + 48 + 16 + 8 + 16 + 8) + 16 + 4 + 4
-    got = schema.traffic({"integrator": STAGES["integrator"]}, layout, contacts=0)
+    got = stages.traffic({"integrator": STAGES["integrator"]}, layout, contacts=0)
     assert got["integrator.advance"] == reads + writes

@@ -1,4 +1,4 @@
-"""Friction at a DEM contact (taichi_ice.slip): the slip rate, a new interface's start and
+"""Friction at a DEM contact (taichi_ice.physics.slip): the slip rate, a new interface's start and
 the rule below v_star.
 
 References that do not share the code: the closed forms of the law at the solved rate (the
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from taichi_ice.batched import contact_friction_batch_ti
 from taichi_ice.codes import RestRule, ThetaMethod
-from taichi_ice.slip import NEW_CONTACT, NO_INTERFACE, contact_friction
+from taichi_ice.physics.batched import contact_friction_batch_ti
+from taichi_ice.physics.slip import NEW_CONTACT, NO_INTERFACE, contact_friction
 
 A, B, MU0, V_STAR, T_C = 0.05, 0.112, 0.872, 1e-5, 3.0
 DT = 1e-4

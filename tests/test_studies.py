@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from taichi_ice.studies import validate_command
+from taichi_ice.experiments.validation import validate_command
 
 # Quick Figure 3 steps are t_c / 75 (t_c / 150 for the fast sinusoid): second-order errors
 # of ~1e-5 in the sinusoids' fundamental.

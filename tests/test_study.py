@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from taichi_ice import study
-from taichi_ice.study import MODELS, bootstrap_ci, verdict
+from taichi_ice.experiments.study import report as study_report
+from taichi_ice.experiments.study import stats as study
+from taichi_ice.experiments.study.stats import MODELS, bootstrap_ci, verdict
 
 # Two independent Monte Carlo resamplings of the same data agree on a 95 % quantile to about
 # this fraction of the standard error (4,000 and 20,000 resamples).
@@ -93,7 +94,7 @@ def synthetic(layouts: int = 12, fractions=(0.7, 0.85)):
 def test_claims_and_carriers_on_a_dataset_with_known_answers():
     """Every claim's verdict and effect is what the synthetic dataset was built to give, and
     the release is carried by rate, the steadier dissipation by rate and memory together."""
-    table = study._table(synthetic())
+    table = study.study_table(synthetic())
     by = {(c["claim"], c.get("model")): c for c in study.claims(table)}
     assert by[("mu = 0.1: blocks slide easily past the pillar", None)]["verdict"] == "holds"
     assert by[("mu = 0.9: the blocks jam", None)]["verdict"] == "holds"
@@ -114,10 +115,10 @@ def test_claims_and_carriers_on_a_dataset_with_known_answers():
 
 def test_report_writes_figures_json_and_markdown(tmp_path):
     """The report of a study: three figures, study.json with every model, study.md tables."""
-    from taichi_ice.scenario import load_scenario
+    from taichi_ice.scene.parse import load_scenario
 
     runs = [{"workers": 2, "scheduler": None, "wall_time": 10.0, "world_steps": 1000}]
-    summary = study.study_report(
+    summary = study_report.study_report(
         synthetic(layouts=4),
         tmp_path,
         scene=load_scenario("pillar"),
@@ -137,5 +138,5 @@ def test_report_writes_figures_json_and_markdown(tmp_path):
         0.872 + (0.05 - 0.112) * np.log(0.1 / 1e-5)
     )
     json.dumps(summary)  # serialisable
-    md = study.study_markdown(summary)
+    md = study_report.study_markdown(summary)
     assert "| mu0.9 |" in md and "carried by" in md and "100 world-steps/s" in md

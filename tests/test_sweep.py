@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 import shapely
 
-from taichi_ice.cli import main
-from taichi_ice.scenario import load_scenario
-from taichi_ice.sweep import SweepError, apply_overrides, load_sweep, run_sweep
+from taichi_ice.commands.cli import main
+from taichi_ice.experiments.sweep.run import run_sweep
+from taichi_ice.experiments.sweep.spec import SweepError, apply_overrides, load_sweep
+from taichi_ice.scene.parse import load_scenario
 
 PILLAR = "scenarios/pillar.toml"
 
@@ -127,7 +128,7 @@ def test_area_fraction_and_speed_overrides_set_what_they_name():
     scene = load_scenario(PILLAR)
     raw = dict(scene.raw)
     raw["field"] = [{**raw["field"][0], "jitter": 0.0}]
-    from taichi_ice.scenario import scene_from_dict
+    from taichi_ice.scene.parse import scene_from_dict
 
     still = scene_from_dict(raw, source="still")
     new = apply_overrides(still, [("field.rubble.area_fraction", 0.7), ("body.pusher.speed", 0.25)])
@@ -164,8 +165,8 @@ def test_two_workers_equal_one_process_and_a_killed_sweep_resumes(sweep_dir, tai
     cluster (batches of 4, then 2) equals the single-process run (batches of 7 and 1, the
     latter with its HDF5 run), value for value, and the resume runs only what was missing;
     the dataset opens in xarray with its coordinates, units and provenance."""
-    from taichi_ice.dataset import open_sweep
-    from taichi_ice.io import read_run
+    from taichi_ice.experiments.sweep.dataset import open_sweep
+    from taichi_ice.run.runfile_read import read_run
 
     if taichi_runtime != ("cpu", "f64"):
         pytest.skip("the worker processes run on the CPU in float64")
@@ -250,9 +251,9 @@ def test_a_reloaded_world_steps_bit_for_bit_as_a_new_one():
     energies, contact memory, neighbour lists), even with the new blocks placed where the
     old contacts are, so that memory left behind would be found. Worlds of another layout
     are refused, naming what differs."""
+    from taichi_ice.engine.world import World
     from taichi_ice.errors import UsageError
-    from taichi_ice.friction import law_from_table
-    from taichi_ice.world import World
+    from taichi_ice.physics.friction_parse import law_from_table
 
     scene = load_scenario("sliding_block")
 
@@ -290,12 +291,12 @@ def test_the_batches_of_a_layout_share_one_world_in_a_process(sweep_dir, monkeyp
     all its batches of one layout: batches of 3, 3 and 2 (padded to 3) build one World and
     reload it twice; the same sweep in batches of 4 gives the same dataset, value for
     value."""
-    from taichi_ice import sweep as sweep_module
-    from taichi_ice.dataset import open_sweep
-    from taichi_ice.world import World
+    from taichi_ice.engine import pool as pool_module
+    from taichi_ice.engine.world import World
+    from taichi_ice.experiments.sweep.dataset import open_sweep
 
-    pool = sweep_module.WorldPool()
-    monkeypatch.setattr(sweep_module, "POOL", pool)
+    pool = pool_module.WorldPool()
+    monkeypatch.setattr(pool_module, "POOL", pool)
     built = []
     build = World.__init__
 
@@ -331,7 +332,7 @@ def test_a_damaged_batch_file_is_set_aside_and_its_worlds_run_again(sweep_dir, c
     batch file is moved aside with a line naming it, only its worlds run again, and the
     dataset equals the undamaged one, value for value; a garbled settings file is one
     SweepError naming it."""
-    from taichi_ice.dataset import open_sweep
+    from taichi_ice.experiments.sweep.dataset import open_sweep
 
     sweep = dataclasses.replace(load_sweep(sweep_dir / "sweep.toml"), batch_size=4)
     out = sweep_dir / "out"

@@ -2,10 +2,12 @@
 --out DIR [--quick]``.
 
 The DEM part of ``taichi-ice validate --dem --out DIR``; the study lives in
-taichi_ice.studies.dem_accuracy (docs/accuracy.md).
+taichi_ice.experiments.validation.dem_accuracy (docs/accuracy.md).
 """
 
-from taichi_ice.studies.dem_accuracy import main
+import sys
+
+from taichi_ice.commands.validate import main
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(["dem_accuracy", *sys.argv[1:]]))

@@ -25,7 +25,7 @@ RULES = ("paper", "healing", "frozen")
 def measure(scene, ratios=RATIOS, times=TIMES) -> dict:
     """Frictional energy (J) and positions (m) at ``times`` for each dt / stable_dt."""
     from taichi_ice.codes import EnergyTerm
-    from taichi_ice.world import World
+    from taichi_ice.engine.world import World
 
     out = {}
     for ratio in ratios:
@@ -61,7 +61,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="folder for JSON and PNG")
     args = parser.parse_args(argv)
     from taichi_ice import backend, load_scenario
-    from taichi_ice.friction import Coulomb, RateState
+    from taichi_ice.physics.friction import Coulomb, RateState
 
     backend.init("cpu", "f64")
     base = load_scenario("pillar")

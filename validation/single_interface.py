@@ -1,10 +1,12 @@
 """The paper's Figure 3 against exact solutions: ``python validation/single_interface.py``.
 
 Same as ``taichi-ice validate --out DIR`` (``--out DIR`` here too); the study lives in
-taichi_ice.studies.
+taichi_ice.experiments.validation.
 """
 
-from taichi_ice.studies.single_interface import main
+import sys
+
+from taichi_ice.commands.validate import main
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(["single_interface", *sys.argv[1:]]))

@@ -3,7 +3,7 @@ block (``python validation/slip_definitions.py``).
 
 A one-dimensional block (276 kg) pressed onto a fixed floor by F_n, its contact a stick
 spring ``k_t = 0.5 k_e L`` (L = 1 m) and dashpot capped at mu F_n, stepped as the engine steps
-(``contact.tangential_force`` for the spring and its cap, then symplectic Euler). Only the
+(``contact_law.tangential_force`` for the spring and its cap, then symplectic Euler). Only the
 friction law's slip rate and a new interface's start differ:
 
 - ``sliding``: the sliding rate ``V = (|F_trial| - mu(V) F_n) / K``, every new interface in
@@ -18,7 +18,7 @@ friction law's slip rate and a new interface's start differ:
   reversed slip ends the interface (the engine's).
 
 Every definition but the first runs with the critically damped dashpot and ends an
-interface whose slip reverses. Checks (the engine's, ``studies.contact_convergence``, in
+interface whose slip reverses. Checks (the engine's, ``validation.contact_convergence``, in
 one dimension): the driven slider's frictional work and slip starts over five halvings of
 dt; a block stopped by its friction under a pull of 0.5, 0.8 and 1.2 mu0 F_n; steady
 sliding against a stop on a floor at 1 mm/s to 10 cm/s. Prints a table and writes
@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from taichi_ice.codes import RestRule, ThetaMethod
-from taichi_ice.contact import tangential_damping, tangential_force
-from taichi_ice.slip import NEW_CONTACT, NO_INTERFACE, contact_friction
+from taichi_ice.physics.contact_law import tangential_damping, tangential_force
+from taichi_ice.physics.slip import NEW_CONTACT, NO_INTERFACE, contact_friction
 
 A, B, MU0, V_STAR, T_C = 0.05, 0.112, 0.872, 1e-5, 3.0
 K_E, K_V, RATIO, WIDTH = 9.75e7, 3.16e4, 0.5, 1.0

@@ -1,0 +1,92 @@
+"""One validation study from the command line, and the worker processes two of them start:
+``python -m taichi_ice.commands.validate STUDY --out DIR [--quick]``.
+
+``taichi-ice validate`` runs them together (``experiments.validation.validate_command``);
+this runs one: ``stability``, ``single_interface``, ``dem_contact``, ``dem_accuracy``,
+``contact_convergence`` or ``speed_accuracy`` (which writes the stability chart first). The
+studies' code is in ``taichi_ice.experiments.validation``; their options are here, where
+argparse lives. ``dem_accuracy`` and ``speed_accuracy`` run each precision in a child process
+started through this module (``--worker``, hidden).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+from pathlib import Path
+
+STUDIES = (
+    "stability",
+    "single_interface",
+    "dem_contact",
+    "dem_accuracy",
+    "contact_convergence",
+    "speed_accuracy",
+)
+# What --quick makes shorter, by study.
+QUICK = {
+    "stability": "shorter runs",
+    "single_interface": "coarser steps",
+    "dem_contact": "coarser steps",
+    "dem_accuracy": "small sizes (tests)",
+    "contact_convergence": "fewer steps and layouts",
+    "speed_accuracy": "fewer steps, 1e4 interfaces",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m taichi_ice.commands.validate",
+        description=__doc__.splitlines()[0],
+    )
+    studies = parser.add_subparsers(dest="study", required=True, metavar="STUDY")
+    for name in STUDIES:
+        module = importlib.import_module(f"taichi_ice.experiments.validation.{name}")
+        p = studies.add_parser(name, help=(module.__doc__ or name).splitlines()[0])
+        p.add_argument("--out", type=Path, default=Path("out/validation"), help="output folder")
+        p.add_argument("--quick", action="store_true", help=QUICK[name])
+        if name == "dem_accuracy":
+            p.add_argument(
+                "--until", type=float, default=None, help="seconds of the pillar runs (default 20)"
+            )
+            p.add_argument(
+                "--reuse",
+                action="store_true",
+                help="analyse the runs already in --out, run nothing",
+            )
+        if name == "speed_accuracy":
+            p.add_argument("--arch", default="cpu", help="Taichi arch (cpu or gpu)")
+            p.add_argument("--interfaces", type=int, default=None, help="interfaces timed")
+            p.add_argument("--result", help=argparse.SUPPRESS)
+        if name in ("dem_accuracy", "speed_accuracy"):
+            p.add_argument("--worker", choices=("f64", "f32"), help=argparse.SUPPRESS)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    study = importlib.import_module(f"taichi_ice.experiments.validation.{args.study}")
+    if args.study == "dem_accuracy":
+        if args.worker:
+            cfg = study.config(args.quick, args.until)
+            study.worker(args.worker, args.out, cfg, log=study.log)
+        else:
+            study.run(args.out, quick=args.quick, until=args.until, reuse=args.reuse)
+    elif args.study == "speed_accuracy":
+        if args.worker:
+            n = args.interfaces or (study.QUICK_N_INTERFACES if args.quick else study.N_INTERFACES)
+            data = study.worker(args.worker, args.arch, n, args.quick)
+            Path(args.result).write_text(json.dumps(data))
+            return 0
+        from ..experiments.validation import stability
+
+        stability.run(args.out, quick=args.quick)
+        study.run(args.out, quick=args.quick, arch=args.arch, n_interfaces=args.interfaces)
+    else:
+        study.run(args.out, quick=args.quick)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,338 @@
+"""Scenes to the NumPy arrays of one batch: what every world needs, checked, in one place.
+
+``assemble(scenes, options)`` concatenates the bodies of every scene world by world and derives
+the per-body and per-world parameters (masses, drag coefficients, the tangential spring, the
+friction law's columns), the sizes and compile-time switches of the batch (``Layout``) and
+its time step. ``World`` uploads the result to Taichi fields; the NumPy reference
+(``reference.ReferenceModel``) reads the same arrays, so the two never derive a parameter
+twice.
+
+NumPy only: importing it imports no Taichi (the polygon and drag modules it reads are the
+NumPy halves of their ``_ti`` twins).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..codes import BodyKind, ThetaMethod
+from ..errors import ScenarioError
+from ..physics import polygon
+from ..physics.drag import drag_coefficients
+from ..scene.model import MAX_VERTICES
+from .options import DEFAULT_SMALL_SLOTS, LARGE_SLOTS, Options
+from .schema import SCAN, HostArrays, Layout
+
+# A dynamic body that moves more than this fraction of its thinnest dimension in one step
+# has left the regime where contacts can be resolved (it would pass a quarter of the way
+# through a neighbour before the contact is seen): the integration has blown up. This is a
+# numerical bound, not a physical one: a jam that stores a megajoule and releases it can
+# throw a block at tens of m/s, and that is the model's answer, not a divergence. (Energy
+# created from nothing is caught by the energy budget, ``budget.breached``.)
+RUNAWAY_STEP_FRACTION = 0.25
+
+# The neighbour lists' skin, as a fraction of the hash cell (the largest small body's
+# diameter), and their length in contact slots. A block drifting at 0.1 m/s keeps its list
+# for ~0.25 s (2,000 steps of the pillar scene) with a 1 m cell. A list holds the pairs a
+# body owns within the skin: its contacts (at most its slots) and near misses. Twice the
+# slots: the most any body listed was 4 in the random and lattice boxes of 1e4 diamonds, 7 in
+# the pillar scene's 17 layouts x 4 laws over 20 s (checked at every step), and more stops
+# the run with a CapacityError that says what to pass.
+SKIN_FRACTION = 0.05
+LIST_SLOTS = 2
+
+# Largest polygon the contact kernel compiles for (its clip buffers are 2 MAXV long); scenes
+# are held to it when they are read (scene.MAX_VERTICES), batches built by hand here.
+MAX_VERTS_LIMIT = MAX_VERTICES
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Everything a batch of worlds needs before its fields exist.
+
+    Attributes:
+        scenes: the worlds, in order.
+        layout: sizes and compile-time switches (``schema.Layout``).
+        host: the arrays of every ``HOST`` field (``schema.HostArrays``).
+        dt: the time step (s). stable_dt: the contact stability limit (s), over every world.
+    """
+
+    scenes: tuple
+    layout: Layout
+    host: HostArrays
+    dt: float
+    stable_dt: float
+
+    def world_slices(self) -> list[slice]:
+        """Body index range of each world."""
+        s = self.host.world_body_start
+        return [slice(int(s[w]), int(s[w + 1])) for w in range(len(self.scenes))]
+
+    def probe_slices(self) -> list[slice]:
+        """Probe index range of each world."""
+        counts = [len(sc.probe_indices) for sc in self.scenes]
+        start = np.concatenate([[0], np.cumsum(counts)]).astype(int)
+        return [slice(int(start[w]), int(start[w + 1])) for w in range(len(self.scenes))]
+
+
+def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
+    """Check that ``scenes`` can run as one batch and build its arrays.
+
+    Args:
+        scenes: the worlds. They must share the ice properties, the water table (present or
+            not) and the integrator of theta (laws that have one); the friction laws (Coulomb,
+            rate-and-state and its variants), their parameters and everything else may
+            differ.
+        options: the engine's settings (``options.Options``; default ``Options()``). Read
+            here: ``dt`` and ``force_dt`` (``Options.time_step``), ``precision`` (None:
+            'f64'), ``slots`` (None: ``DEFAULT_SMALL_SLOTS`` plus the most large bodies of
+            any world, at most ``LARGE_SLOTS``) and ``energy`` (``Layout.energy``; off, the
+            step neither computes nor stores its terms: fields of ~270 B a block fewer at
+            f64).
+
+    Raises:
+        ValueError: no scenes, or worlds that disagree on what a batch shares (the message
+            names the first world that differs and what differs).
+        ScenarioError: a polygon with more vertices than the kernels hold.
+        StabilityError: a dt above the stability limit without ``force_dt``.
+    """
+    options = Options() if options is None else options
+    scenes = tuple(scenes)
+    if not scenes:
+        raise ValueError("a batch needs at least one scene")
+    _check_shared(scenes)
+    dt, stable_dt = options.time_step(scenes)
+
+    arrays, sizes = _bodies(scenes)
+    first = scenes[0]
+    coulomb = all(s.friction.name == "coulomb" for s in scenes)
+    arrays.update(_worlds(scenes, coulomb))
+    methods = {s.friction.method for s in scenes if hasattr(s.friction, "method")}
+    large_per_world = sizes.pop("large_per_world")
+    slots = (
+        options.slots
+        if options.slots is not None
+        else DEFAULT_SMALL_SLOTS + min(int(large_per_world), LARGE_SLOTS)
+    )
+    layout = Layout(
+        **sizes,
+        slots=slots,
+        nbr_len=LIST_SLOTS * slots,
+        skin=SKIN_FRACTION * sizes["cell_size"],
+        hash_size=hash_size_for(sizes["n_small"]),
+        coulomb=coulomb,
+        rate_state=not coulomb,
+        water=first.water is not None,
+        force_ext=bool(np.any(np.asarray(arrays["body_force_ext"]) != 0.0)),
+        theta_method=int(ThetaMethod.from_label(methods.pop()))
+        if methods
+        else int(ThetaMethod.EXPONENTIAL),
+        contact_stiffness=first.ice.contact_stiffness,
+        contact_viscosity=first.ice.contact_viscosity,
+        tangential_stiffness=first.ice.tangential_stiffness,
+        tangential_damping=first.ice.tangential_damping,
+        crushing=first.ice.crushing_strength is not None,
+        crushing_force=(first.ice.crushing_strength or 0.0) * first.ice.thickness,
+        runaway_step=_runaway_step(scenes),
+        precision=options.precision or "f64",
+        energy=options.energy,
+    )
+    if not layout.water:
+        arrays.pop("body_drag_linear")
+        arrays.pop("body_drag_rotational")
+    return Batch(scenes, layout, HostArrays(layout, arrays), dt, stable_dt)
+
+
+def hash_size_for(n_small: int) -> int:
+    """Buckets of the spatial hash: the smallest power of two >= n_small (at least SCAN), a
+    load factor between one half and one. (The hash is rebuilt only with the lists, every few
+    hundred steps, so the fuller table's extra bucket collisions cost little.)"""
+    return max(SCAN, 1 << int(np.ceil(np.log2(max(n_small, 2)))))
+
+
+def _check_shared(scenes: tuple) -> None:
+    """Every world agrees with the first on what one set of kernels compiles in."""
+    first = scenes[0]
+    for w, s in enumerate(scenes[1:], start=1):
+        where = f"world {w} ({s.source}) differs from world 0 ({first.source}) in"
+        if s.ice != first.ice:
+            raise ValueError(f"{where} the [ice] table; all worlds of a batch share it")
+        if s.water != first.water:
+            raise ValueError(f"{where} the [water] table; all worlds of a batch share it")
+    # The laws may mix (Coulomb, rate-and-state and its variants, any parameters); the
+    # integrator of theta is compiled in, so the laws that have one must agree on it.
+    methods = [(w, s) for w, s in enumerate(scenes) if hasattr(s.friction, "method")]
+    for w, s in methods[1:]:
+        w0, s0 = methods[0]
+        if s.friction.method != s0.friction.method:
+            raise ValueError(
+                f"world {w} ({s.source}) differs from world {w0} ({s0.source}) in the "
+                f"rate-and-state integrator ({s.friction.method} against "
+                f"{s0.friction.method}); the kernels compile one"
+            )
+
+
+def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
+    """Per-body arrays of every world, world-major, and the batch's sizes."""
+    rows: dict[str, list] = {
+        k: []
+        for k in (
+            "body_world",
+            "body_kind",
+            "body_mass",
+            "body_inertia",
+            "body_radius",
+            "body_vert_count",
+            "body_force_ext",
+            "body_drag_linear",
+            "body_drag_rotational",
+            "body_probe",
+            "body_pos",
+            "body_angle",
+            "body_vel",
+            "body_omega",
+        )
+    }
+    verts: list[np.ndarray] = []
+    n_probe = 0
+    for w, s in enumerate(scenes):
+        masses, inertias = s.masses, s.inertias
+        for i, b in enumerate(s.bodies):
+            v = np.asarray(b.vertices, dtype=np.float64)
+            if len(v) > MAX_VERTS_LIMIT:
+                raise ScenarioError(
+                    f"{s.source}: body '{b.name}' has {len(v)} vertices; the contact kernels "
+                    f"hold at most {MAX_VERTS_LIMIT}: simplify its outline"
+                )
+            rows["body_world"].append(w)
+            rows["body_kind"].append(BodyKind.from_label(b.kind))
+            rows["body_mass"].append(masses[i])
+            rows["body_inertia"].append(inertias[i])
+            rows["body_radius"].append(float(np.max(np.hypot(v[:, 0], v[:, 1]))))
+            rows["body_vert_count"].append(len(v))
+            rows["body_force_ext"].append(b.force)
+            c_lin, c_rot = (0.0, 0.0)
+            if s.water is not None:
+                area = masses[i] / (s.ice.density * s.ice.thickness)
+                c_lin, c_rot = drag_coefficients(
+                    area,
+                    s.ice.thickness,
+                    s.ice.density,
+                    s.water.density,
+                    s.water.form_drag,
+                    s.water.skin_drag,
+                )
+            rows["body_drag_linear"].append(c_lin)
+            rows["body_drag_rotational"].append(c_rot)
+            rows["body_probe"].append(n_probe if b.probe else -1)
+            n_probe += int(b.probe)
+            rows["body_pos"].append(b.position)
+            rows["body_angle"].append(b.angle)
+            rows["body_vel"].append(b.velocity)
+            rows["body_omega"].append(b.omega)
+            verts.append(v)
+
+    n = len(rows["body_kind"])
+    out = {
+        k: np.array(v, dtype=np.float64).reshape(n, 2)
+        if k in ("body_force_ext", "body_pos", "body_vel")
+        else np.array(v)
+        for k, v in rows.items()
+    }
+    kind = out["body_kind"] = out["body_kind"].astype(np.int32)
+    world = out["body_world"] = out["body_world"].astype(np.int32)
+    count = out["body_vert_count"] = out["body_vert_count"].astype(np.int32)
+    out["body_probe"] = out["body_probe"].astype(np.int32)
+    dynamic = kind == BodyKind.DYNAMIC
+    safe_mass = np.where(dynamic, out["body_mass"], 1.0)
+    safe_inertia = np.where(dynamic, out["body_inertia"], 1.0)
+    out["body_inv_mass"] = np.where(dynamic, 1.0 / safe_mass, 0.0)
+    out["body_inv_inertia"] = np.where(dynamic, 1.0 / safe_inertia, 0.0)
+
+    # Small bodies go into the spatial hash; larger ones (walls, pushers) are checked against
+    # every body of their world.
+    radius = out["body_radius"]
+    r_small = radius[dynamic].max() if dynamic.any() else radius.max(initial=1.0)
+    small = radius <= r_small * (1.0 + 1e-9)
+    out["body_small"] = small.astype(np.int32)
+    large_ids = np.flatnonzero(~small).astype(np.int32)
+    n_worlds = len(scenes)
+    out["large_ids"] = large_ids
+    out["world_large_start"] = np.searchsorted(world[large_ids], np.arange(n_worlds + 1)).astype(
+        np.int32
+    )
+    out["world_body_start"] = np.searchsorted(world, np.arange(n_worlds + 1)).astype(np.int32)
+    # Bodies of one shape (a field's blocks) share their unturned outline: it is stored once.
+    shapes: dict[bytes, int] = {}
+    local_start = np.zeros(n, dtype=np.int32)
+    distinct: list[np.ndarray] = []
+    n_local = 0
+    for i, v in enumerate(verts):
+        key = v.tobytes()
+        if key not in shapes:
+            shapes[key] = n_local
+            distinct.append(v)
+            n_local += len(v)
+        local_start[i] = shapes[key]
+    out["body_local_start"] = local_start
+    out["vert_local"] = np.concatenate(distinct) if distinct else np.zeros((0, 2))
+    # Their edges' outward unit normals, which the contact stage turns with the body instead
+    # of normalising its turned edges every step (a square root and a division each).
+    out["vert_normal_local"] = (
+        np.concatenate([polygon.edge_normals(v) for v in distinct])
+        if distinct
+        else np.zeros((0, 2))
+    )
+    sizes = {
+        "n_bodies": n,
+        "n_local_verts": n_local,
+        "n_worlds": n_worlds,
+        "n_probes": n_probe,
+        "n_large": len(large_ids),
+        "max_verts": int(count.max(initial=3)),
+        "n_small": int(small.sum()),
+        # A hash cell is the diameter of the largest small body: two small bodies can only
+        # touch if their cells are neighbours.
+        "cell_size": 2.0 * float(r_small),
+        "large_per_world": int(np.diff(out["world_large_start"]).max(initial=0)),
+    }
+    return out, sizes
+
+
+def _worlds(scenes: tuple, coulomb: bool) -> dict[str, np.ndarray]:
+    """Per-world columns of the friction law: ``world_mu`` if every world is Coulomb, else
+    every world's ``contact_row`` (``friction``), which any law gives."""
+    if coulomb:
+        return {"world_mu": np.array([s.friction.mu for s in scenes], dtype=float)}
+    rows = [s.friction.contact_row() for s in scenes]
+    out = {f"world_{k}": np.array([r[k] for r in rows], dtype=float) for k in rows[0]}
+    for k in ("memory", "rest_rule"):
+        out[f"world_{k}"] = out[f"world_{k}"].astype(np.int32)
+    return out
+
+
+def _runaway_step(scenes: tuple) -> float:
+    """m: RUNAWAY_STEP_FRACTION of the thinnest dynamic body's width, the most a dynamic body
+    may move in one step (the kernel compares it with ``|v| dt``, dt read at run time, so
+    that no dt is compiled in)."""
+    thinnest = math.inf
+    for s in scenes:
+        for b in s.bodies:
+            if b.kind == BodyKind.DYNAMIC.label:
+                thinnest = min(thinnest, polygon.min_width(b.vertices))
+    if not math.isfinite(thinnest):
+        return math.inf
+    return RUNAWAY_STEP_FRACTION * thinnest
+
+
+__all__ = [
+    "MAX_VERTS_LIMIT",
+    "RUNAWAY_STEP_FRACTION",
+    "Batch",
+    "assemble",
+    "hash_size_for",
+]

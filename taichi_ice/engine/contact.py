@@ -1,0 +1,498 @@
+"""Narrow phase and contact forces (Hopkins 1992), with per-contact memory.
+
+For every candidate pair the owner body's thread clips the two outlines
+(``polygon_ti.overlap_ti``) and applies:
+
+- normal force  ``F_n = k_e A + k_v L v_n``, no tension (``F_n >= 0``); ``A`` the overlap
+  area, ``L`` the contact width (chord), ``v_n`` the approach speed along the normal. With an
+  ice strength (``[ice] crushing_strength``) the elastic force is capped at strength x
+  thickness x L: the overlap beyond the cap is crushed (``crush``), not recovered, and its
+  work is booked as crushing;
+- tangential force from a stick spring ``k_t = ratio k_e L`` (proportional to the contact
+  width, like the normal one) and a dashpot ``c_t`` that damps it to a fraction of critical
+  at the pair's mass along the tangent (``tangential_damping``) on the tangential stretch
+  ``xi``, capped at ``mu F_n`` (Cundall and Strack 1979): beyond the cap the contact slips,
+  the spring-dashpot relaxes toward the cap and the slip distance times the cap is
+  frictional work;
+- ``mu`` from the world's law: Coulomb, or rate-and-state (and its variants) through
+  ``slip_ti.contact_friction_ti``: the slip rate solved in the step (the sliding rate, never
+  faster than the surfaces), ``theta`` and the slip rate carried by the contact while it
+  slides, and the rule below ``v_star`` (Lishman et al. 2013).
+
+Ownership: each pair is handled once, by a dynamic body if exactly one is dynamic, else by
+the lower id; small-large pairs by the small body. The owner keeps the contact's memory
+(partner, ``xi``, ``theta``, slip rate, stored elastic energy, crushed area) in one of its K slots;
+a pair that no longer overlaps is not written again, so its memory is dropped. The slots
+are single-buffered: only the owner's thread touches them, and it copies the last step's
+memory out (``remember``) before writing this step's over it. More than K contacts raise
+the overflow status, which the simulation turns into an error.
+
+Forces are gathered in 64-bit fixed point (``schema.FORCE_QUANTUM``), so a run is bit-for-bit
+reproducible on any number of threads and in any batch. (On a device whose integer atomics
+fail inside loops the whole quanta are summed in float64, exact below 2^53 of them:
+``backend.float_gather``.) Overflow reports there are plain stores of a count above the
+limit (``raise_status``), not the largest such count.
+
+The contact laws are pure functions, each twice (``taichi_ice``'s twin convention: the plain
+name is the NumPy reference in ``contact_law``, ``_ti`` the Taichi function in
+``contact_law_ti``): ``normal_force``, ``crush``, ``tangential_damping``, ``tangential_force``
+and ``contact_work``. The NumPy reference of a whole pair is ``reference_contact.contact_force``.
+This module holds the forces of a step (``ContactStage``); finding the candidate pairs (the
+outlines, ownership, the neighbour lists) is its base's, ``contact_lists.ContactLists``.
+
+Energy (``contact_work``): the work of a contact's forces, at the velocity the bodies move
+with over the step, goes to the owner's ``body_energy`` row as friction (slip) and viscous
+(dashpots) and to the contact as the elastic energy it holds: the work its elastic force
+``k_e A`` has done on the approach, ``integral k_e A v_n dt`` (``integral k_e A dA / L`` for
+translation along the normal), and its stick spring's. When the contact ends, what it still
+holds goes to the owner's ``SEVERED`` term: the normal force follows the overlap's area
+and the spring's stiffness the contact width, neither a potential, so floes that slide
+apart take work the contact never gives back (``codes.BodyEnergy.SEVERED``).
+"""
+
+# No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+
+from typing import ClassVar
+
+import taichi as ti
+
+from ..codes import BodyEnergy, Status
+from ..physics.contact_law_ti import (
+    contact_work_ti,
+    cross2,
+    crush_ti,
+    normal_force_ti,
+    perp,
+    tangential_damping_ti,
+    tangential_force_ti,
+)
+from ..physics.polygon_ti import facing_gap_ti, overlap_normals_ti
+from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE
+from ..physics.slip_ti import contact_friction_ti
+from .contact_lists import ContactLists
+from .schema import FORCE_QUANTUM, Layout, law_columns
+from .stages import Access
+from .state import Data, Model, quantum_dtype
+
+
+@ti.data_oriented
+class ContactStage(ContactLists):
+    """Finds overlapping pairs, applies contact forces and keeps contact memory."""
+
+    ACCESS: ClassVar[dict[str, Access]] = {
+        "compute": Access(
+            reads=(
+                # Model
+                "body_world",
+                "body_radius",
+                "body_local_start",
+                "body_vert_count",
+                "vert_local",
+                "vert_normal_local",
+                *law_columns(),
+                "body_inv_mass",
+                "body_inv_inertia",
+                # Neighbour lists
+                "nbr_count",
+                "nbr_ids",
+                "nbr_path",
+                "nbr_gap",
+                # Data in
+                "time_step",
+                "body_pos",
+                "body_rot",
+                "body_vel",
+                "body_omega",
+                "contact_count",
+                "contact_partner",
+                "contact_xi",
+                "contact_elastic",
+                "contact_theta",
+                "contact_slip",
+                "contact_crushed",
+                "body_force_q",
+                "body_torque_q",
+                "body_energy",
+                "body_dvel",
+                "body_domega",
+                "status",
+            ),
+            writes=(
+                "contact_count",
+                "contact_partner",
+                "contact_xi",
+                "contact_elastic",
+                "contact_theta",
+                "contact_slip",
+                "contact_crushed",
+                "body_force_q",
+                "body_torque_q",
+                "body_energy",
+                "status",
+                "nbr_gap",
+            ),
+            per_contact=(
+                "body_vel",
+                "body_omega",
+                "body_inv_mass",
+                "body_inv_inertia",
+                "contact_partner",
+                "contact_xi",
+                "contact_elastic",
+                "contact_theta",
+                "contact_slip",
+                "contact_crushed",
+                "body_force_q",
+                "body_torque_q",
+                "body_energy",
+                "body_dvel",
+                "body_domega",
+            ),
+        ),
+        "build_lists": Access(
+            reads=(
+                "body_world",
+                "body_kind",
+                "body_small",
+                "body_radius",
+                "body_local_start",
+                "body_vert_count",
+                "vert_local",
+                "world_large_start",
+                "large_ids",
+                "bucket_end",
+                "bucket_count",
+                "sorted_ids",
+                "body_pos",
+                "body_angle",
+                "body_rot",
+                "nbr_ids",
+                "world_nbr_stale",
+                "status",
+            ),
+            writes=(
+                "nbr_ids",
+                "nbr_count",
+                "nbr_ref_pos",
+                "nbr_ref_angle",
+                "world_nbr_stale",
+                "nbr_rebuild",
+                "status",
+                "nbr_path",
+                "nbr_gap",
+            ),
+        ),
+    }
+
+    def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash, neighbours):
+        self.layout, self.model, self.data = layout, model, data
+        self.hash, self.neighbours = spatial_hash, neighbours
+        self.k_e = float(layout.contact_stiffness)
+        self.k_v = float(layout.contact_viscosity)
+        self.ratio = float(layout.tangential_stiffness)
+        self.zeta = float(layout.tangential_damping)
+        self.crush = float(layout.crushing_force)
+        self.tol = NEWTON_TOLERANCE[layout.precision]
+        self.method = int(layout.theta_method)
+        self.maxv = layout.max_verts
+
+    @ti.func
+    def add_force(self, i, force, torque, serial: ti.template()):
+        """Add a contact's force and torque to body i, in fixed point: atomically when
+        bodies are stepped in parallel, plainly when a thread steps the whole world
+        (``serial``); integer sums are the same in any order either way."""
+        d, q, qt = ti.static((self.data, 1.0 / FORCE_QUANTUM, quantum_dtype()))
+        # Truncated to whole quanta as 64-bit integers, then held as the sums' type (the
+        # same integers in float64, ``backend.float_gather``).
+        fx = ti.cast(ti.cast(force[0] * q, ti.i64), qt)
+        fy = ti.cast(ti.cast(force[1] * q, ti.i64), qt)
+        tq = ti.cast(ti.cast(torque * q, ti.i64), qt)
+        if ti.static(serial):
+            d.body_force_q[i] = d.body_force_q[i] + ti.Vector([fx, fy], qt)
+            d.body_torque_q[i] = d.body_torque_q[i] + tq
+        else:
+            ti.atomic_add(d.body_force_q[i][0], fx)
+            ti.atomic_add(d.body_force_q[i][1], fy)
+            ti.atomic_add(d.body_torque_q[i], tq)
+
+    @ti.func
+    def pair(
+        self,
+        i,
+        j,
+        p: ti.template(),
+        p_normals: ti.template(),
+        n_p,
+        xi,
+        elastic,
+        theta,
+        last_slip,
+        crushed,
+        used,
+        dt,
+        serial: ti.template(),
+    ):
+        """Contact between owner i, whose outline relative to its centroid is ``p`` (its
+        edges' outward normals ``p_normals``), and
+        partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``theta``,
+        ``last_slip``, ``crushed``: zero and ``NEW_CONTACT`` if it was not in contact).
+        Returns
+        the owner's new slot count, and the gap (m) by which a facing edge proved the pair
+        apart (negative if none did)."""
+        m, d = ti.static((self.model, self.data))
+        xi_, xj_ = d.body_pos[i], d.body_pos[j]
+        q, n_q = self.outline(j, xi_)
+        # Most candidates (bounding circles that meet) do not touch, and one of the two
+        # edges that face each other separates 99 % of those (random box of 1e4 diamonds):
+        # try them before the full separating-axis test and the clip. (-14 % of a step's
+        # CPU time there; the jammed pillar scene's step the same.)
+        toward = ti.cast(xj_ - xi_, self.layout.real)
+        gap = facing_gap_ti(p, p_normals, n_p, q, n_q, toward)
+        if gap < 0.0:
+            gap = facing_gap_ti(q, self.normals(j), n_q, p, n_p, -toward)
+        separated = gap >= 0.0
+        area = 0.0
+        point = ti.math.vec2(0.0, 0.0)
+        normal = ti.math.vec2(0.0, 0.0)
+        width = 0.0
+        if not separated:
+            area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
+        if area > 0.0:
+            # point is relative to body i
+            r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)
+            v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
+                d.body_vel[i] + perp(d.body_omega[i], r_i)
+            )
+            tangent = ti.Vector([-normal[1], normal[0]])
+            approach = -v_rel.dot(normal)
+            slip = v_rel.dot(tangent)
+
+            # Normal: elastic on the overlap not crushed; with a strength, the overlap beyond
+            # the cap is crushed (kept, not recovered) and its work is booked.
+            cap_n = 0.0
+            crushed_new = crushed
+            if ti.static(self.layout.crushing):
+                cap_n, crushed_new = crush_ti(area, crushed, width, self.k_e, self.crush)
+            f_n, f_el = normal_force_ti(
+                ti.max(area - crushed_new, 0.0), width, approach, self.k_e, self.k_v
+            )
+            crush_work = 0.0
+            if ti.static(self.layout.crushing):
+                f_n = ti.min(f_n, cap_n)
+                if crushed_new > crushed and width > 0.0:
+                    crush_work = cap_n * (crushed_new - crushed) / width
+
+            # Tangential: a stick spring proportional to the contact width and a dashpot
+            # that damps it to a fraction of critical, ``tangential_damping_ti``.
+            k_t = self.ratio * self.k_e * width
+            c_t = tangential_damping_ti(
+                k_t,
+                self.zeta,
+                m.body_inv_mass[i],
+                m.body_inv_inertia[i] * cross2(r_i, tangent) ** 2,
+                m.body_inv_mass[j],
+                m.body_inv_inertia[j] * cross2(r_j, tangent) ** 2,
+            )
+            mu = 0.0
+            theta_new = 0.0
+            slip_rate = 0.0
+            w = m.body_world[i]
+            if ti.static(self.layout.rate_state):
+                f_trial = ti.abs(k_t * (xi + slip * dt) + c_t * slip)
+                mu, theta_new, slip_rate = contact_friction_ti(
+                    theta,
+                    last_slip,
+                    slip,
+                    f_trial,
+                    f_n,
+                    k_t * dt + c_t,
+                    dt,
+                    m.world_A[w],
+                    m.world_B[w],
+                    m.world_mu0[w],
+                    m.world_v_star[w],
+                    m.world_t_c[w],
+                    m.world_memory[w],
+                    m.world_rest_rule[w],
+                    ti.static(self.method),
+                    ti.static(self.tol),
+                )
+            else:
+                mu = m.world_mu[w]
+
+            f_t, xi_new, slip_work, damp_work = tangential_force_ti(
+                xi, slip, dt, k_t, c_t, mu * f_n
+            )
+            force = f_n * normal + f_t * tangent  # on j; -force on i
+            self.add_force(j, force, cross2(r_j, force), serial)
+            self.add_force(i, -force, -cross2(r_i, force), serial)
+
+            # The work of the contact's forces, booked at the velocity the bodies move with
+            # over the step (``contact_work_ti``): the elastic part is what the contact holds
+            # (normal, on the approach, less what crushed; tangential, the stick spring's
+            # energy at this step's stiffness, which follows the width), the rest is
+            # dissipated. (Without a budget, ``Layout.energy`` off, none of it is computed.)
+            if ti.static(self.layout.energy):
+                rel_change = (d.body_dvel[j] + perp(d.body_domega[j], r_j)) - (
+                    d.body_dvel[i] + perp(d.body_domega[i], r_i)
+                )
+                held, viscous, friction = contact_work_ti(
+                    f_n,
+                    f_el,
+                    f_t,
+                    approach,
+                    -rel_change.dot(normal),
+                    rel_change.dot(tangent),
+                    dt,
+                    slip_work,
+                    damp_work,
+                    k_t,
+                    xi,
+                    xi_new,
+                    crush_work,
+                )
+                elastic += held
+                # The owner's rows: plain stores (an augmented assignment would be an atomic).
+                e_f = d.body_energy[i, BodyEnergy.FRICTION]
+                d.body_energy[i, BodyEnergy.FRICTION] = e_f + friction
+                e_v = d.body_energy[i, BodyEnergy.VISCOUS]
+                d.body_energy[i, BodyEnergy.VISCOUS] = e_v + viscous
+                if ti.static(self.layout.crushing):
+                    e_c = d.body_energy[i, BodyEnergy.CRUSHING]
+                    d.body_energy[i, BodyEnergy.CRUSHING] = e_c + crush_work
+
+            if used < self.layout.slots:
+                d.contact_partner[i, used] = j
+                d.contact_xi[i, used] = xi_new
+                if ti.static(self.layout.energy):
+                    d.contact_elastic[i, used] = elastic
+                if ti.static(self.layout.rate_state):
+                    d.contact_theta[i, used] = theta_new
+                    d.contact_slip[i, used] = slip_rate
+                if ti.static(self.layout.crushing):
+                    d.contact_crushed[i, used] = crushed_new
+            used += 1
+        return used, gap
+
+    @ti.func
+    def remember(self, i):
+        """Body i's contact memory of the last step, copied out of its slots (which this
+        step overwrites: only the owner's thread touches them, so one buffer suffices), and
+        its count."""
+        d, k = ti.static((self.data, self.layout.slots))
+        # (Slot count, not the contact stiffness: one element when no budget is kept.)
+        k_budget = ti.static(k if self.layout.energy else 1)
+        old = ti.Struct(
+            partner=ti.Vector.zero(ti.i32, k),
+            xi=ti.Vector.zero(self.layout.real, k),
+            elastic=ti.Vector.zero(self.layout.real, k_budget),
+            theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
+            slip=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
+            crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
+        )
+        n_old = d.contact_count[i]
+        for s in range(n_old):
+            old.partner[s] = d.contact_partner[i, s]
+            old.xi[s] = d.contact_xi[i, s]
+            if ti.static(self.layout.energy):
+                old.elastic[s] = d.contact_elastic[i, s]
+            if ti.static(self.layout.rate_state):
+                old.theta[s] = d.contact_theta[i, s]
+                old.slip[s] = d.contact_slip[i, s]
+            if ti.static(self.layout.crushing):
+                old.crushed[s] = d.contact_crushed[i, s]
+        return old, n_old
+
+    @ti.func
+    def body(self, i, dt, serial: ti.template()):
+        """Every contact of owner i with the partners of its neighbour list whose bounding
+        circles meet its own (ascending ids, so the sums of a body do not depend on how the
+        list was built); the memory of the last step is read from its slots and this step's
+        written over it."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        old, n_old = self.remember(i)
+        used = 0
+        # The owner's outline and its edges' normals once for all its candidates.
+        p, n_p = self.outline(i, d.body_pos[i])
+        p_normals = self.normals(i)
+        # What the last step's contacts held, less what carries on: the elastic energy of
+        # the contacts that ended (``BodyEnergy.SEVERED``).
+        severed = ti.cast(0.0, ti.f64)
+        if ti.static(self.layout.energy):
+            for s in range(n_old):
+                severed += ti.cast(old.elastic[s], ti.f64)
+        path_i = nb.nbr_path[i]
+        for k in range(nb.nbr_count[i]):
+            j = nb.nbr_ids[i, k]
+            # Found apart by a gap that the two bodies' paths since cannot have closed: the
+            # test would find them apart again (most candidates, most steps). Gaps are kept
+            # for the first ``slots`` entries, more than any list measured held.
+            if k < self.layout.slots:
+                if path_i + nb.nbr_path[j] < nb.nbr_gap[i, k]:
+                    continue
+            if not self.near(i, j):
+                if k < self.layout.slots:
+                    reach = m.body_radius[i] + m.body_radius[j]
+                    apart = (d.body_pos[j] - d.body_pos[i]).norm() - reach
+                    nb.nbr_gap[i, k] = self.gap_bound(i, j, apart, path_i)
+                continue
+            # The pair's memory from the last step, if it was in contact then.
+            xi = ti.cast(0.0, self.layout.real)
+            elastic = ti.cast(0.0, self.layout.real)
+            theta = ti.cast(NEW_CONTACT, self.layout.real)
+            last_slip = ti.cast(0.0, self.layout.real)
+            crushed = ti.cast(0.0, self.layout.real)
+            for s in range(n_old):
+                if old.partner[s] == j:
+                    xi = old.xi[s]
+                    if ti.static(self.layout.energy):
+                        elastic = old.elastic[s]
+                    if ti.static(self.layout.rate_state):
+                        theta = old.theta[s]
+                        last_slip = old.slip[s]
+                    if ti.static(self.layout.crushing):
+                        crushed = old.crushed[s]
+            carried, gap = self.pair(
+                i,
+                j,
+                p,
+                p_normals,
+                n_p,
+                xi,
+                elastic,
+                theta,
+                last_slip,
+                crushed,
+                used,
+                dt,
+                serial,
+            )
+            if k < self.layout.slots:
+                nb.nbr_gap[i, k] = self.gap_bound(i, j, ti.cast(gap, ti.f64), path_i)
+            if ti.static(self.layout.energy):
+                if carried > used:  # in contact: its memory carries on
+                    severed -= ti.cast(elastic, ti.f64)
+            used = carried
+        if ti.static(self.layout.energy):
+            if severed != 0.0:  # most bodies, most steps: no contact ended, no row touched
+                e = d.body_energy[i, BodyEnergy.SEVERED]
+                d.body_energy[i, BodyEnergy.SEVERED] = e + severed
+        d.contact_count[i] = ti.min(used, self.layout.slots)
+        # More contacts than slots is reported (never silently dropped): the caller turns it
+        # into CapacityError. (The list's own overflow is reported when it is built.)
+        if used > self.layout.slots:
+            self.raise_status(self.model.body_world[i], Status.SLOT_OVERFLOW, used)
+
+    @ti.func
+    def listed(self, i, dt, serial: ti.template()):
+        """Body i's contacts, its candidates taken from its neighbour list; ``serial``: one
+        thread steps the whole world (``WorldStepper``), so forces need no atomics. (The
+        list is read in place: a copy of its near entries cost 2 % of a step.)"""
+        self.body(i, dt, serial)
+
+    @ti.kernel
+    def compute(self):
+        """Forces of every contact of the step in parallel over bodies, candidates from the
+        neighbour lists, and the contacts' memory."""
+        for i in range(self.layout.n_bodies):
+            self.listed(i, self.data.time_step[None], False)

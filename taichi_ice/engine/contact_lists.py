@@ -1,0 +1,244 @@
+"""The half of the contact stage that finds candidate pairs: outlines, ownership, neighbour lists.
+
+``ContactLists`` is the base of ``contact.ContactStage``: the Taichi functions that turn a
+body's shape into place (``outline``, ``normals``), decide which body of a pair handles it
+(``wants``: the ownership rules told in ``contact``), cheaply reject pairs that cannot touch
+(``near``, ``beyond_a_face``, ``gap_bound``), and rebuild each body's neighbour list from the
+spatial hash (the kernel ``build_lists``). The forces of the pairs found, and the contacts'
+memory, are ``contact.ContactStage``'s; it declares what both halves' kernels read and write
+(``ContactStage.ACCESS``).
+"""
+
+# No "from __future__ import annotations": Taichi reads kernel annotations as objects.
+
+import taichi as ti
+
+from .. import backend
+from ..codes import BodyKind, Status
+from .broadphase import bucket_of
+from .stages import Stage
+
+# Round-off allowance of a gap that lets a pair be skipped (``ContactStage.gap_bound``), as
+# a fraction of the two circumradii: 1e-5 m for two of the paper's diamonds, against ~1e-7 m
+# of error in a float32 outline a metre across, turned and shifted relative to the pair.
+GAP_MARGIN = 1e-5
+
+
+@ti.data_oriented
+class ContactLists(Stage):
+    """Candidate pairs of the contact stage: outlines turned into place, pair ownership and
+    the neighbour lists. Holds no state of its own: ``ContactStage.__init__`` sets the
+    layout, fields, spatial hash and neighbour lists these read."""
+
+    @ti.func
+    def outline(self, i, origin):
+        """Body i's outline relative to ``origin`` in a (MAXV, 2) matrix, and its count.
+
+        Positions are float64 in either precision and only their difference is cast to
+        the run's precision: clipping near the pair keeps float32 accurate in large fields,
+        its resolution scaling with the bodies' size, not the domain's.
+        The outline is the body's shape (``vert_local``, shared by bodies of one shape, so
+        it stays in cache) turned by its rotation (``body_rot``, the integrator's cos and
+        sin): four multiply-adds a vertex instead of a turned outline stored per body.
+        """
+        m, d = ti.static((self.model, self.data))
+        x = ti.cast(d.body_pos[i] - origin, self.layout.real)  # positions are f64
+        return self.turned(i, m.vert_local, x, True), m.body_vert_count[i]
+
+    @ti.func
+    def normals(self, i):
+        """Outward unit normals of body i's edges in a (MAXV, 2) matrix: its shape's
+        (``vert_normal_local``) turned by its rotation, as ``outline`` turns the vertices
+        (``polygon_ti.edge_normals_ti`` of the outline, without a square root an edge)."""
+        zero = ti.Vector([0.0, 0.0], self.layout.real)
+        return self.turned(i, self.model.vert_normal_local, zero, False)
+
+    @ti.func
+    def turned(self, i, local: ti.template(), shift, shifted: ti.template()):
+        """Rows of body i's shape in ``local`` (a field of 2-vectors indexed like
+        ``vert_local``) turned by the body's rotation, plus ``shift`` if ``shifted``, in a
+        (MAXV, 2) matrix. Unrolled to the largest outline, so that the matrix's indices are
+        constants (``polygon_ti._min_penetration_axis_ti`` says why)."""
+        m, d = ti.static((self.model, self.data))
+        out = ti.Matrix.zero(self.layout.real, self.maxv, 2)
+        rot = d.body_rot[i]
+        c, s = rot[0], rot[1]
+        start, count = m.body_local_start[i], m.body_vert_count[i]
+        for k in ti.static(range(self.maxv)):
+            if k < count:
+                v = local[start + k]
+                if ti.static(shifted):
+                    out[k, 0] = shift[0] + (c * v[0] - s * v[1])
+                    out[k, 1] = shift[1] + (s * v[0] + c * v[1])
+                else:
+                    out[k, 0] = c * v[0] - s * v[1]
+                    out[k, 1] = s * v[0] + c * v[1]
+        return out
+
+    @ti.func
+    def owns(self, i, j):
+        """True if body i handles the pair (i, j) of two small bodies (see ``wants``)."""
+        kind = ti.static(self.model.body_kind)
+        dyn_i, dyn_j = kind[i] == BodyKind.DYNAMIC, kind[j] == BodyKind.DYNAMIC
+        return (dyn_i and not dyn_j) or (dyn_i == dyn_j and dyn_i and i < j)
+
+    @ti.func
+    def near(self, i, j):
+        """Bounding circles of bodies i and j overlap."""
+        m, d = ti.static((self.model, self.data))
+        reach = m.body_radius[i] + m.body_radius[j]
+        return (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach
+
+    @ti.func
+    def beyond_a_face(self, i, j, margin):
+        """Body i's bounding circle, grown by ``margin``, lies wholly outside one face of
+        body j (so they cannot overlap): a cheap rejection for large bodies, whose bounding
+        circles (a wall's is half its length) meet nearly every small body of the world."""
+        m, d = ti.static((self.model, self.data))
+        q, n_q = self.outline(j, d.body_pos[i])  # relative to i's centroid
+        r = m.body_radius[i] + margin
+        outside = False
+        for k in range(n_q):
+            a = ti.Vector([q[k, 0], q[k, 1]])
+            k1 = (k + 1) % n_q
+            e = ti.Vector([q[k1, 0], q[k1, 1]]) - a
+            # Outward normal of a counter-clockwise outline; i's centroid is the origin.
+            if -a.dot(ti.Vector([e[1], -e[0]])) > r * e.norm():
+                outside = True
+        return outside
+
+    @ti.func
+    def wants(self, i, j):
+        """True if body i handles the pair (i, j), j != i, of its world.
+
+        Small dynamic bodies own their contacts with small bodies that are not dynamic and,
+        among dynamic ones, those of higher id; small bodies own their contacts with large
+        ones if either is dynamic (a small fixed or kinematic body, a pillar, those with
+        large dynamic bodies); large bodies among themselves the lower id, if either moves.
+        """
+        m, _d = ti.static((self.model, self.data))
+        dyn_i = m.body_kind[i] == BodyKind.DYNAMIC
+        dyn_j = m.body_kind[j] == BodyKind.DYNAMIC
+        keep = False
+        if m.body_small[j]:
+            keep = m.body_small[i] != 0 and self.owns(i, j)
+        elif m.body_small[i]:
+            keep = dyn_i or dyn_j
+        else:
+            keep = j > i and (dyn_i or dyn_j)
+        return keep
+
+    @ti.func
+    def gap_bound(self, i, j, gap, path_i):
+        """What ``nbr_gap`` keeps of a pair found ``gap`` apart (m; negative: not proven
+        apart, -1 kept): the gap less a margin for round-off (``GAP_MARGIN`` of the two
+        circumradii, far above the error of outlines turned and shifted in float32), plus
+        both bodies' paths now, rounded down to float32. While the paths sum to less, no
+        point of either body can have moved into the other."""
+        m, nb = ti.static((self.model, self.neighbours))
+        bound = ti.cast(-1.0, ti.f32)
+        margin = GAP_MARGIN * ti.cast(m.body_radius[i] + m.body_radius[j], ti.f64)
+        if gap > margin:
+            total = gap - margin + path_i + nb.nbr_path[j]
+            bound = ti.cast(total * (1.0 - 1e-6), ti.f32)  # f32 rounds to nearest: below
+        return bound
+
+    @ti.func
+    def list_add(self, i, j, n):
+        """Append j to body i's list (``n`` entries so far) if i owns the pair and their
+        bounding circles come within the skin (for a large partner, also if i's circle does
+        not lie wholly beyond one of its faces); returns the new count, which may pass the
+        list's length (reported by ``end_list``)."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        skin = ti.static(self.layout.skin)
+        if j != i and self.wants(i, j):
+            reach = m.body_radius[i] + m.body_radius[j] + skin
+            if (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach:
+                if m.body_small[j] or not self.beyond_a_face(i, j, skin):
+                    if n < self.layout.nbr_len:
+                        nb.nbr_ids[i, n] = j
+                    n += 1
+        return n
+
+    @ti.func
+    def end_list(self, i, n):
+        """Close body i's list of ``n`` entries: its count, where body i stands now, and the
+        overflow report."""
+        d, nb = ti.static((self.data, self.neighbours))
+        nb.nbr_count[i] = ti.min(n, self.layout.nbr_len)
+        nb.nbr_ref_pos[i] = d.body_pos[i]
+        nb.nbr_ref_angle[i] = d.body_angle[i]
+        # No entry proven apart yet; paths count from here (the world's lists are rebuilt
+        # together, so a partner's path restarts too).
+        nb.nbr_path[i] = 0.0
+        for k in range(ti.min(n, self.layout.slots)):
+            nb.nbr_gap[i, k] = ti.cast(-1.0, ti.f32)
+        if n > self.layout.nbr_len:
+            self.raise_status(self.model.body_world[i], Status.LIST_OVERFLOW, n)
+
+    @ti.func
+    def raise_status(self, w, code: ti.template(), value):
+        """Raise world w's status word ``code`` to ``value``: atomically, or where integer
+        atomics fail inside loops (``backend.float_gather``) by a plain store when it is
+        higher, which another body of the world may overwrite with its own count above
+        the limit (the overflow is still reported; the count may not be the largest)."""
+        if ti.static(backend.float_gather()):
+            if value > self.data.status[w, code]:
+                self.data.status[w, code] = value
+        else:
+            ti.atomic_max(self.data.status[w, code], value)
+
+    @ti.func
+    def build_list(self, i):
+        """Body i's neighbour list from every body of its world (one thread per world):
+        ascending by construction."""
+        m, _d = ti.static((self.model, self.data))
+        w = m.body_world[i]
+        n = 0
+        for j in range(m.world_body_start[w], m.world_body_start[w + 1]):
+            n = self.list_add(i, j, n)
+        self.end_list(i, n)
+
+    @ti.func
+    def build_list_hashed(self, i):
+        """Body i's neighbour list from the 3 x 3 cells of the spatial hash around it and the
+        large bodies of its world, sorted ascending: the same list as ``build_list``."""
+        m, d, h, nb = ti.static((self.model, self.data, self.hash, self.neighbours))
+        w = m.body_world[i]
+        n = 0
+        if m.body_small[i]:
+            c = h.cell_of(d.body_pos[i])
+            for k in range(9):
+                cell = c + ti.Vector([k % 3 - 1, k // 3 - 1])
+                b = bucket_of(cell, w, h.mask)
+                for e in range(h.bucket_end[b] - h.bucket_count[b], h.bucket_end[b]):
+                    j = h.sorted_ids[e]
+                    # A bucket may hold other cells or worlds: keep only this cell's bodies.
+                    if m.body_world[j] == w:
+                        cj = h.cell_of(d.body_pos[j])
+                        if cj[0] == cell[0] and cj[1] == cell[1]:
+                            n = self.list_add(i, j, n)
+        for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
+            n = self.list_add(i, m.large_ids[g], n)
+        # Ascending ids (insertion sort of a few entries).
+        for k in range(1, ti.min(n, self.layout.nbr_len)):
+            v = nb.nbr_ids[i, k]
+            s = k
+            while s > 0 and nb.nbr_ids[i, s - 1] > v:
+                nb.nbr_ids[i, s] = nb.nbr_ids[i, s - 1]
+                s -= 1
+            nb.nbr_ids[i, s] = v
+        self.end_list(i, n)
+
+    @ti.kernel
+    def build_lists(self):
+        """Rebuild the neighbour lists of every stale world from the spatial hash (built
+        from the current positions first, ``SpatialHash.build``)."""
+        m, nb = ti.static((self.model, self.neighbours))
+        for i in range(self.layout.n_bodies):
+            if nb.world_nbr_stale[m.body_world[i]]:
+                self.build_list_hashed(i)
+        for w in range(self.layout.n_worlds):
+            nb.world_nbr_stale[w] = 0
+            if w == 0:
+                nb.nbr_rebuild[None] = 0

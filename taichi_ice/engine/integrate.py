@@ -1,0 +1,212 @@
+"""Time integration: semi-implicit (symplectic) Euler for dynamic bodies.
+
+    v(t+dt) = v(t) + dt F(x(t), v(t)) / m,     x(t+dt) = x(t) + dt v(t+dt)
+
+and likewise for the angle. Fixed bodies never move; kinematic bodies move at their own
+velocity and do work on whatever they push. Work and dissipation of the step are evaluated
+with the mid-step velocity, which is the exact power of a force held constant over the step,
+so kinetic energy and work agree to round-off and the energy residual measures only the
+time discretisation of the contact forces.
+
+The stage also reads the contact forces gathered in fixed point, clears them for the next
+step, accumulates probe impulses, raises the non-finite and runaway flags, and marks a
+world's neighbour lists stale when one of its bodies has moved half their skin.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import taichi as ti
+
+from ..codes import BodyEnergy, BodyKind, Status
+from ..physics.drag_ti import water_drag_ti
+from ..physics.polygon_ti import rotation_ti
+from .schema import FORCE_QUANTUM, Layout
+from .stages import Access, Stage
+from .state import Data, Model, quantum_dtype
+
+
+@ti.data_oriented
+class Integrator(Stage):
+    """Advances every body by one step."""
+
+    ACCESS: ClassVar[dict[str, Access]] = {
+        "advance": Access(
+            reads=(
+                # Model
+                "body_probe",
+                "body_kind",
+                "body_force_ext",
+                "body_drag_linear",
+                "body_drag_rotational",
+                "body_inv_mass",
+                "body_inv_inertia",
+                # Data in
+                "time_step",
+                "body_force_q",
+                "body_torque_q",
+                "probe_impulse",
+                "body_vel",
+                "body_omega",
+                "body_pos",
+                "body_angle",
+                "body_energy",
+                # Neighbour lists: has the body moved half the skin?
+                "body_small",
+                "body_radius",
+                "body_world",
+                "nbr_ref_pos",
+                "nbr_ref_angle",
+                "nbr_path",
+            ),
+            writes=(
+                "body_force_q",
+                "body_torque_q",
+                "probe_impulse",
+                "body_vel",
+                "body_omega",
+                "body_pos",
+                "body_angle",
+                "body_energy",
+                "body_dvel",
+                "body_domega",
+                "status",
+                "body_rot",
+                "world_nbr_stale",
+                "nbr_rebuild",
+                "nbr_path",
+            ),
+        ),
+        "orient": Access(reads=("body_angle",), writes=("body_rot",)),
+    }
+
+    def __init__(self, layout: Layout, model: Model, data: Data, neighbours):
+        self.layout, self.model, self.data = layout, model, data
+        self.neighbours = neighbours
+        # A dynamic body that moves farther than this in a step (m) flags the run as diverged
+        # (assemble); the step compares it with |v| dt, dt read at run time.
+        self.runaway_step = float(layout.runaway_step)
+        self.half_skin = 0.5 * float(layout.skin)
+
+    @ti.kernel
+    def orient(self):
+        """Turn every body to its angle (``body_rot``): once at set-up; the step turns the
+        bodies that move."""
+        for i in range(self.layout.n_bodies):
+            self.turn(i)
+
+    @ti.func
+    def turn(self, i):
+        """Body i's rotation (cos, sin of its angle), from which the contact stage turns its
+        outline: two numbers a body, not two a vertex. In float64 by ``rotation_ti`` (libm's
+        cos and sin were 12 % of a step), in float32 by ``ti.cos`` and ``ti.sin``."""
+        angle = self.data.body_angle[i]
+        if ti.static(self.layout.precision == "f64"):
+            self.data.body_rot[i] = rotation_ti(angle)
+        else:
+            self.data.body_rot[i] = ti.Vector([ti.cos(angle), ti.sin(angle)])
+
+    @ti.kernel
+    def advance(self):
+        for i in range(self.layout.n_bodies):
+            self.body(i, self.data.time_step[None])
+
+    @ti.func
+    def moved(self, i):
+        """How far any point of body i that its neighbour list relies on has moved since the
+        list was built (m): its centroid for a small body (the bounding circle turns with
+        it); for a large one, whose faces are tested, also its circumradius times the turn."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        dist = (d.body_pos[i] - nb.nbr_ref_pos[i]).norm()
+        if not m.body_small[i]:
+            dist += m.body_radius[i] * ti.abs(d.body_angle[i] - nb.nbr_ref_angle[i])
+        return dist
+
+    @ti.func
+    def displace(self, i, shift, turn):
+        """Shift body i's centroid by ``shift`` (m, f64) and turn it by ``turn`` (rad), and add
+        to its ``nbr_path`` how far any point of it moved: the centroid's step plus its
+        circumradius times the turn (an arc is longer than its chord), both as stored, so
+        rounding of the angle is counted too. The contact stage skips a pair found apart by
+        a gap while their paths since add up to less (``ContactStage.body``)."""
+        m, d, nb = ti.static((self.model, self.data, self.neighbours))
+        pos, angle = d.body_pos[i], d.body_angle[i]
+        d.body_pos[i] = pos + shift
+        d.body_angle[i] = angle + turn
+        moved = (d.body_pos[i] - pos).norm() + m.body_radius[i] * ti.abs(
+            ti.cast(d.body_angle[i] - angle, ti.f64)
+        )
+        nb.nbr_path[i] = nb.nbr_path[i] + moved
+
+    @ti.func
+    def moving(self, i):
+        """Mark body i's world's lists stale if it has moved half their skin."""
+        m, nb = ti.static((self.model, self.neighbours))
+        if self.moved(i) > self.half_skin:
+            nb.world_nbr_stale[m.body_world[i]] = 1
+            nb.nbr_rebuild[None] = 1
+
+    @ti.func
+    def body(self, i, dt):
+        """Advance body i by one step of dt.
+
+        Only body i's thread writes its rows (state, energy, probe), so they are updated
+        with plain stores: an augmented assignment to a field is an atomic in Taichi (a
+        compare-and-swap loop for a float), which the step does not need."""
+        m, d, qt = ti.static((self.model, self.data, quantum_dtype()))
+        f = ti.cast(d.body_force_q[i], self.layout.real) * FORCE_QUANTUM
+        tau = ti.cast(d.body_torque_q[i], self.layout.real) * FORCE_QUANTUM
+        d.body_force_q[i] = ti.Vector([0, 0], qt)
+        d.body_torque_q[i] = 0
+        p = m.body_probe[i]
+        if p >= 0:
+            d.probe_impulse[p] = d.probe_impulse[p] + ti.cast(f * dt, ti.f64)
+        kind = m.body_kind[i]
+        if kind == BodyKind.DYNAMIC:
+            v0, w0 = d.body_vel[i], d.body_omega[i]
+            f_ext = ti.Vector([0.0, 0.0], self.layout.real)
+            if ti.static(self.layout.force_ext):
+                f_ext = m.body_force_ext[i]
+            f_drag = ti.Vector([0.0, 0.0], self.layout.real)
+            t_drag = ti.cast(0.0, self.layout.real)
+            if ti.static(self.layout.water):
+                f_drag, t_drag = water_drag_ti(
+                    v0, w0, m.body_drag_linear[i], m.body_drag_rotational[i]
+                )
+            v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
+            w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
+            vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
+            if ti.static(self.layout.energy):
+                e_d = d.body_energy[i, BodyEnergy.DRAG]
+                d.body_energy[i, BodyEnergy.DRAG] = e_d + ti.cast(
+                    -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
+                )
+                if ti.static(self.layout.force_ext):
+                    e_w = d.body_energy[i, BodyEnergy.WORK]
+                    d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
+            if ti.static(self.layout.energy):  # what the contacts book with next step
+                d.body_dvel[i] = v1 - v0
+                d.body_domega[i] = w1 - w0
+            d.body_vel[i] = v1
+            d.body_omega[i] = w1
+            self.displace(i, ti.cast(dt * v1, ti.f64), dt * w1)
+            self.turn(i)
+            self.moving(i)
+            speed2 = v1.norm_sqr()
+            if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
+                d.status[m.body_world[i], Status.NONFINITE] = 1
+            elif speed2 * dt * dt > self.runaway_step * self.runaway_step:
+                d.status[m.body_world[i], Status.RUNAWAY] = 1
+        elif kind == BodyKind.KINEMATIC:
+            # The contact force f acts on the pusher; the pusher does -f.v on the rest.
+            v, w = d.body_vel[i], d.body_omega[i]
+            if ti.static(self.layout.energy):
+                e_w = d.body_energy[i, BodyEnergy.WORK]
+                d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(
+                    -(f.dot(v) + tau * w) * dt, ti.f64
+                )
+            self.displace(i, ti.cast(dt * v, ti.f64), dt * w)
+            if w != 0.0:
+                self.turn(i)
+            self.moving(i)

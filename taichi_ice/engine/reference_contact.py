@@ -1,0 +1,275 @@
+"""NumPy twin of one contact: the forces, work and memory of a pair, as the contact kernel.
+
+:func:`contact_force` is the reference of ``contact.ContactStage.pair``, one pair at a time
+in float64: the Hopkins (1992) overlap of the two outlines (``polygon.overlap``: area ``A``,
+contact point, normal from ``i`` into ``j``, width ``L``); the velocity of ``j`` relative to
+``i`` at the contact point, split into the approach speed ``v_n`` and the slip ``v_t``; the
+normal force ``F_n = max(k_e (A - A_c) + k_v L v_n, 0)``, with ``A_c`` the crushed area when
+the ice has a strength (``contact_law.crush``); the tangential stick spring
+``k_t = ratio k_e L`` and its dashpot on the stretch ``xi``, capped at ``mu F_n`` (Cundall and
+Strack 1979); ``mu`` from Coulomb, or from the rate-and-state row of the world through
+``slip.contact_friction`` (the sliding rate solved in the step, the rule below v_star); the
+stored elastic energy grows by the elastic forces' work. ``ContactMemory`` is what a contact
+carries from one step to the next. The whole step, which gathers these over every owned pair,
+is ``reference.reference_step``. NumPy only: importing it starts no Taichi.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ..physics.contact_law import (
+    contact_work,
+    crush,
+    normal_force,
+    tangential_damping,
+    tangential_force,
+)
+from ..physics.friction import method_code
+from ..physics.polygon import overlap
+from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE, NO_INTERFACE, contact_friction
+
+__all__ = ["ContactForce", "ContactMemory", "contact_force"]
+
+
+@dataclass(frozen=True)
+class ContactMemory:
+    """What a contact carries from one step to the next (one kernel contact slot).
+
+    Attributes:
+        xi: tangential spring stretch along the tangent (m).
+        area: overlap area at the last step (m^2).
+        elastic: elastic energy the contact holds (J), normal and tangential: booked as
+            severed (``BodyEnergy.SEVERED``) when the contact ends.
+        theta: rate-and-state variable; ``slip.NO_INTERFACE`` when the contact has no
+            sliding interface (and for Coulomb), ``slip.NEW_CONTACT`` before its first step.
+        slip: the law's slip rate along the tangent (m/s, signed; 0 for Coulomb).
+        crushed: overlap area crushed so far (m^2).
+    """
+
+    xi: float = 0.0
+    area: float = 0.0
+    elastic: float = 0.0
+    theta: float = NEW_CONTACT
+    slip: float = 0.0
+    crushed: float = 0.0
+
+
+class ContactForce(NamedTuple):
+    """One contact of one step, as the kernel evaluates it.
+
+    Attributes:
+        area: overlap area (m^2). point: ``(2,)`` contact point (m). normal: ``(2,)`` unit
+            normal from the owner into the partner. width: contact width ``L`` (m).
+            kind: ``codes.OverlapKind``.
+        approach: approach speed along the normal (m/s), positive when closing.
+        slip: tangential velocity of the partner relative to the owner (m/s), along
+            ``tangent = (-normal_y, normal_x)``.
+        mu: friction coefficient used. normal_force: ``F_n`` (N), clamped at 0.
+        elastic_force: ``k_e A`` (N). tangential_force: along the tangent, on the partner (N).
+        force: ``(2,)`` total force on the partner (N); the owner gets ``-force``.
+        torque_owner, torque_partner: about each centroid (N m).
+        memory: the contact's new memory (stretch, area, stored elastic energy, theta).
+        slip_work: frictional work of the step (J). viscous_work: dashpot work (J).
+        crushing_work: work on the crushed overlap (J). sliding_rate: V of the law (m/s,
+            signed along the tangent; 0 for Coulomb).
+    """
+
+    area: float
+    point: np.ndarray
+    normal: np.ndarray
+    width: float
+    kind: int
+    approach: float
+    slip: float
+    mu: float
+    normal_force: float
+    elastic_force: float
+    tangential_force: float
+    force: np.ndarray
+    torque_owner: float
+    torque_partner: float
+    memory: ContactMemory
+    slip_work: float
+    viscous_work: float
+    crushing_work: float = 0.0
+    sliding_rate: float = 0.0
+
+
+def _cross(a, b) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _spin(omega: float, r) -> np.ndarray:
+    """omega (z) x r: velocity of a point at ``r`` on a body spinning at ``omega``."""
+    return np.array([-omega * r[1], omega * r[0]])
+
+
+def contact_force(
+    p: np.ndarray,
+    q: np.ndarray,
+    pos_owner,
+    vel_owner,
+    omega_owner: float,
+    pos_partner,
+    vel_partner,
+    omega_partner: float,
+    *,
+    dt: float,
+    k_e: float,
+    k_v: float,
+    ratio: float,
+    law,
+    inv_mass: tuple[float, float],
+    inv_inertia: tuple[float, float],
+    zeta: float = 0.25,
+    dvel: tuple = ((0.0, 0.0), (0.0, 0.0)),
+    domega: tuple[float, float] = (0.0, 0.0),
+    memory: ContactMemory | None = None,
+    method: int | None = None,
+    crushing_force: float | None = None,
+    tol: float = NEWTON_TOLERANCE["f64"],
+) -> ContactForce | None:
+    """NumPy reference of ``ContactStage.pair``: the contact between an owner and a partner.
+
+    The outlines and centroids may be given in any frame, the same for all four; the
+    kernel takes the owner's centroid as the origin (``outline``), which keeps float32
+    accurate far from the world origin.
+
+    Args:
+        p: ``(n, 2)`` outline of the owner (m), counter-clockwise.
+        q: ``(m, 2)`` outline of the partner (m), in the frame of ``p``.
+        pos_owner, vel_owner, omega_owner: centroid (m) in that frame, velocity (m/s), spin
+            (rad/s).
+        pos_partner, vel_partner, omega_partner: likewise for the partner.
+        dt: time step (s). k_e: N/m^2. k_v: Pa s.
+        ratio: ``k_t / (k_e L)`` (``[ice] tangential_stiffness``).
+        law: the world's friction: a Coulomb mu (float), or a law whose ``contact_row`` the
+            rate-and-state contact runs (any law: Coulomb is A = B = 0).
+        inv_mass, inv_inertia: ``1 / m`` (1/kg) and ``1 / I`` (1/(kg m^2)) of owner and
+            partner, 0 for a fixed or kinematic body.
+        zeta: the tangential dashpot's fraction of critical damping
+            (``[ice] tangential_damping``; ``contact_law.tangential_damping``).
+        dvel, domega: the velocity (m/s) and spin (rad/s) changes of the owner's and the
+            partner's last steps, with which the contact books its work
+            (``contact_law.contact_work``).
+        memory: the contact's memory from the last step, or None for a new contact.
+        method: ``codes.ThetaMethod`` for theta; default the law's own method.
+        crushing_force: strength x thickness (N/m), or None for no strength.
+        tol: Newton's tolerance of the sliding rate (``slip.NEWTON_TOLERANCE``).
+
+    Returns:
+        A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
+        outlines do not overlap.
+    """
+    ov = overlap(p, q)
+    if not ov.area > 0.0:
+        return None
+    area, point, normal, width = ov.area, ov.centroid, ov.normal, ov.width
+    r_i = point - np.asarray(pos_owner, dtype=np.float64)
+    r_j = point - np.asarray(pos_partner, dtype=np.float64)
+    v_rel = (np.asarray(vel_partner, dtype=np.float64) + _spin(omega_partner, r_j)) - (
+        np.asarray(vel_owner, dtype=np.float64) + _spin(omega_owner, r_i)
+    )
+    tangent = np.array([-normal[1], normal[0]])
+    approach = -float(v_rel @ normal)
+    slip = float(v_rel @ tangent)
+    old = memory if memory is not None else ContactMemory()
+    cap_n, crushed = math.inf, old.crushed
+    if crushing_force is not None:
+        cap_n, crushed = crush(area, old.crushed, width, k_e, crushing_force)
+    f_n, f_el = normal_force(max(area - crushed, 0.0), width, approach, k_e, k_v)
+    crushing_work = 0.0
+    if crushing_force is not None:
+        f_n = min(f_n, cap_n)
+        if crushed > old.crushed and width > 0.0:
+            crushing_work = cap_n * (crushed - old.crushed) / width
+
+    k_t = ratio * k_e * width
+    c_t = tangential_damping(
+        k_t,
+        zeta,
+        inv_mass[0],
+        inv_inertia[0] * _cross(r_i, tangent) ** 2,
+        inv_mass[1],
+        inv_inertia[1] * _cross(r_j, tangent) ** 2,
+    )
+    theta_new, v = NO_INTERFACE, 0.0
+    if isinstance(law, (int, float)):
+        mu, theta_new = float(law), 0.0  # no theta is kept
+    else:
+        row = law.contact_row()
+        code = method_code(getattr(law, "method", "exponential")) if method is None else method
+        f_trial = abs(k_t * (old.xi + slip * dt) + c_t * slip)
+        mu, theta_new, v = contact_friction(
+            old.theta,
+            old.slip,
+            slip,
+            f_trial,
+            f_n,
+            k_t * dt + c_t,
+            dt,
+            row["A"],
+            row["B"],
+            row["mu0"],
+            row["v_star"],
+            row["t_c"],
+            row["memory"],
+            row["rest_rule"],
+            code,
+            tol,
+        )
+
+    f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
+    force = f_n * normal + f_t * tangent
+    # The work of its forces at the bodies' mid-step velocity (``contact_law.contact_work``).
+    change = (np.asarray(dvel[1], dtype=np.float64) + _spin(domega[1], r_j)) - (
+        np.asarray(dvel[0], dtype=np.float64) + _spin(domega[0], r_i)
+    )
+    held, viscous, friction = contact_work(
+        f_n,
+        f_el,
+        f_t,
+        approach,
+        -float(change @ normal),
+        float(change @ tangent),
+        dt,
+        slip_work,
+        damp_work,
+        k_t,
+        old.xi,
+        xi_new,
+        crushing_work,
+    )
+    return ContactForce(
+        area=area,
+        point=point,
+        normal=normal,
+        width=width,
+        kind=ov.kind,
+        approach=approach,
+        slip=slip,
+        mu=mu,
+        normal_force=f_n,
+        elastic_force=f_el,
+        tangential_force=f_t,
+        force=force,
+        torque_owner=-_cross(r_i, force),
+        torque_partner=_cross(r_j, force),
+        memory=ContactMemory(
+            xi=xi_new,
+            area=area,
+            elastic=old.elastic + held,
+            theta=theta_new,
+            slip=v,
+            crushed=crushed,
+        ),
+        slip_work=friction,
+        viscous_work=viscous,
+        crushing_work=crushing_work,
+        sliding_rate=v,
+    )

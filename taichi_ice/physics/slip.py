@@ -1,0 +1,183 @@
+"""Friction at a DEM contact: the slip rate, a new interface's start, the rule below ``v_star``.
+
+A contact's tangential force comes from a stick spring ``k_t`` and dashpot ``c_t`` on the
+stretch ``xi``, capped at ``mu F_n`` (``contact_law.tangential_force``). The rate-and-state law
+needs the contact's slip rate V: how fast its two surfaces slide over each other. Two
+speeds bound it:
+
+- the **sliding rate**, the part of the step's displacement the stick spring does not take
+  up: zero while the contact sticks, and exactly what the backward-Euler relaxation of the
+  spring-dashpot toward the cap slides (``V dt``):
+
+      F_trial = -k_t (xi + s dt) - c_t s               the force if the contact stuck
+      V_slide = max(|F_trial| - mu(V) F_n, 0) / K,     K = k_t dt + c_t
+
+- the **surface speed** ``|s|``, the tangential speed of the two surfaces past each other at
+  the contact point, set by the motion of the blocks.
+
+**V is the sliding rate, never faster than the surfaces**: ``V = min(V_slide, |s|)``. The
+cap matters where the sliding rate is not the blocks' doing: when a loaded contact breaks
+free, its spring gives up ``(mu0 - mu) F_n / k_t`` of stretch at a rate set by ``c_t`` and
+dt (8 m/s at 100 kN, more as dt shrinks), and an interface started in equilibrium there had
+mu near 0 for seconds.
+
+**A new interface starts in equilibrium at its slip rate** (the paper's "on initiation of a
+new sliding interface"), which is that of its first sliding step only for a contact that
+slides from its first touch (``NEW_CONTACT``): its surfaces meet already moving. A contact
+that touched and stuck (``NO_INTERFACE``) starts from rest: its slip rate grows from zero,
+and the law takes over where it passes ``v_star``, in equilibrium there (theta = 0); the
+step then carries theta to its end at the step's rate, as for any interface. (Started in
+equilibrium at its first step's rate instead, even capped at the surfaces' speed, an
+interface starts at the creep rate of the stuck spring, which is set by k_t: the driven
+slider's frictional work then scattered by 2e-3 over the steps, with no order.)
+
+mu depends on V through ``y = ln(V / v_star)`` and through this step's update of theta, so V
+is solved per contact, in the step, before the force is applied: with
+``mu0 + theta_new(y) + A y = c0 + c1 y`` (every integrator's theta update is affine in y when
+y is held over the step), the sliding rate solves
+
+    g(y) = K v_star e^y + F_n max(c0 + c1 y, 0) - |F_trial| = 0,      0 <= y <= y_s,
+
+``y_s = ln(|s| / v_star)``. g is convex; if ``g(y_s) <= 0`` the contact would slide faster
+than its surfaces and V = |s|; otherwise g has one root in (0, y_s) (g(0) < 0 there), which
+Newton's method started at the smaller of y_s and ``y_hi`` (the sliding rate at the smallest
+mu on the way) reaches monotonically from above in a few iterations.
+
+Below ``v_star`` (which includes sticking) the law does not apply, and ``RestRule`` says
+what does:
+
+- ``paper`` (default): mu = mu0 exactly, as the paper states; the interface ends, and a
+  contact that slides again is a new interface. A slip that reverses its direction between
+  two steps passed through zero on the way: the interface ended there
+  (``last_slip * slip < 0``), however fast both steps slid, and the contact starts again
+  from rest. (A block stopped by its friction would otherwise carry the weak state of its
+  fast slide through the reversal, and slide off under a load mu0 holds.)
+- ``healing``: theta keeps relaxing toward 0 over t_c and mu = max(mu0 + theta, 0): a
+  contact that comes to rest after fast sliding is weak at first and heals;
+- ``frozen``: theta is held and mu = max(mu0 + theta, 0) until the contact slides again.
+
+A Coulomb world in a rate-and-state batch (``memory`` 0, A = B = 0) gets mu0 exactly.
+
+Twins (the package's convention): ``contact_friction`` here (NumPy, scalars; this module
+imports no Taichi) and ``slip_ti.contact_friction_ti`` (Taichi, called by the contact kernel).
+"""
+
+import math
+
+from ..codes import RestRule
+from .friction import theta_step
+
+# theta of a contact with no sliding interface: one that touched last step and stuck (or whose
+# interface ended below v_star under the paper's rule), and one that touches for the first
+# time (NEW_CONTACT). theta itself is never positive (it starts at -B y <= 0 and relaxes
+# toward -B y).
+NO_INTERFACE = 1.0e30
+NEW_CONTACT = 3.0e30
+NO_INTERFACE_ABOVE = 0.5 * NO_INTERFACE
+NEW_CONTACT_ABOVE = 2.0e30
+# Newton stops once a step moves y = ln(V / v_star) by less than this (relative to 1 + y),
+# or after NEWTON_ITERATIONS; convergence is quadratic from above, so a handful suffice.
+NEWTON_TOLERANCE = {"f64": 1e-13, "f32": 1e-6}
+NEWTON_ITERATIONS = 30
+
+
+def contact_friction(
+    theta,
+    last_slip,
+    slip,
+    f_trial,
+    f_n,
+    K,
+    dt,
+    A,
+    B,
+    mu0,
+    v_star,
+    t_c,
+    memory,
+    rule,
+    method,
+    tol=1e-13,
+):
+    """mu of a contact this step, its new theta and its slip rate (NumPy twin of
+    ``slip_ti.contact_friction_ti``).
+
+    Args:
+        theta: the contact's theta from the last step: ``NO_INTERFACE`` if it touched and
+            had no interface, ``NEW_CONTACT`` if it did not touch.
+        last_slip: the slip rate of the last step along the tangent (m/s, signed; 0 if none).
+        slip: ``s``, the tangential speed of the partner's surface past the owner's at the
+            contact point this step (m/s, signed along the same tangent).
+        f_trial: ``|F_trial|`` (N), the tangential force if the contact stuck this step.
+        f_n: normal force (N, >= 0). K: ``k_t dt + c_t`` (N s/m, > 0). dt: step (s).
+        A, B, mu0, v_star, t_c: the law's parameters.
+        memory: 1 if theta is carried, 0 for a Coulomb world of a rate-and-state batch
+            (A = B = 0: mu is exactly mu0).
+        rule: ``codes.RestRule`` below v_star. method: ``codes.ThetaMethod``.
+        tol: Newton's tolerance on ``y = ln(V / v_star)``.
+
+    Returns:
+        ``(mu, theta_new, V)``: mu for the cap ``mu F_n``, theta to carry (``NO_INTERFACE``
+        when the contact has no interface), and the slip rate ``V = min(V_slide, |s|)``
+        with the sign of ``slip`` (m/s).
+    """
+    speed = abs(slip)
+    if rule == RestRule.PAPER and last_slip * slip < 0.0:
+        theta = NO_INTERFACE  # the slip reversed: it passed through zero, below v_star
+    fresh = theta > NO_INTERFACE_ABOVE or memory == 0
+    # A new interface starts in equilibrium at its slip rate: a contact's first step at the
+    # surfaces' (capped) rate; a contact that was at rest at v_star, which its slip passed
+    # on the way up (theta = 0), whatever rate this step reaches.
+    new = theta > NEW_CONTACT_ABOVE or memory == 0
+    start = 0.0 if fresh else theta
+    # Below v_star.
+    mu_low, theta_low = mu0, NO_INTERFACE
+    if not fresh and rule == RestRule.HEALING:
+        theta_low = float(theta_step(theta, 0.0, 0.0, 0.0, dt, B, t_c, method))
+        mu_low = max(mu0 + theta_low, 0.0)
+    elif not fresh and rule == RestRule.FROZEN:
+        theta_low = theta
+        mu_low = max(mu0 + theta, 0.0)
+    elif fresh and memory != 0 and rule != RestRule.PAPER:
+        theta_low = 0.0  # an interface at rest: in equilibrium at v_star
+    # At or above v_star: mu(y) = max(c0 + c1 y, 0).
+    a, b = 0.0, -B
+    if not new:
+        a = float(theta_step(start, 0.0, 0.0, 0.0, dt, B, t_c, method))
+        b = float(theta_step(start, 1.0, 1.0, 1.0, dt, B, t_c, method)) - a
+    c0, c1 = mu0 + a, A + b
+    if speed <= v_star or K * v_star + f_n * max(c0, 0.0) - f_trial >= 0.0:
+        v = min(max(f_trial - mu_low * f_n, 0.0) / K, speed)
+        return mu_low, theta_low, -v if slip < 0.0 else v
+    y_s = math.log(speed / v_star)
+    capped = K * speed + f_n * max(c0 + c1 * y_s, 0.0) - f_trial <= 0.0
+    if capped:
+        y = y_s  # it would slide faster than its surfaces move: V = |s|
+    else:
+        # The sliding rate at the smallest mu on the way bounds the root from above.
+        mu_min = max(c0, 0.0) if c1 >= 0.0 else 0.0
+        y = min(math.log((f_trial - f_n * mu_min) / (K * v_star)), y_s)
+        for _ in range(NEWTON_ITERATIONS):
+            e = K * v_star * math.exp(y)
+            m = c0 + c1 * y
+            g = e + f_n * max(m, 0.0) - f_trial
+            gp = e + (f_n * c1 if m > 0.0 else 0.0)
+            dy = g / gp
+            y -= dy
+            if dy <= tol * (1.0 + y):
+                break
+    theta_new = -B * y if new else float(theta_step(start, y, y, y, dt, B, t_c, method))
+    mu = max(mu0 + theta_new + A * y, 0.0)
+    v = speed if capped else v_star * math.exp(y)
+    return mu, theta_new, -v if slip < 0.0 else v
+
+
+__all__ = [
+    "NEWTON_ITERATIONS",
+    "NEWTON_TOLERANCE",
+    "NEW_CONTACT",
+    "NEW_CONTACT_ABOVE",
+    "NO_INTERFACE",
+    "NO_INTERFACE_ABOVE",
+    "contact_friction",
+]

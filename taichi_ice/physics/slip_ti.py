@@ -1,0 +1,102 @@
+"""Friction at a DEM contact as a Taichi function: the twin of ``slip.contact_friction``.
+
+The slip rate solved in the step, a new interface's start and the rule below ``v_star`` are
+described in ``slip``, which holds the NumPy reference and the constants both share
+(``NO_INTERFACE``, ``NEW_CONTACT``, Newton's tolerance and iterations); this module holds only
+the function the contact kernel calls, step for step as its twin.
+"""
+
+# No ``from __future__ import annotations``: Taichi reads the annotations of its functions.
+
+import taichi as ti
+
+from ..codes import RestRule
+from .fmath_ti import exp_any, log_any
+from .friction_ti import theta_step_ti
+from .slip import NEW_CONTACT_ABOVE, NEWTON_ITERATIONS, NO_INTERFACE, NO_INTERFACE_ABOVE
+
+__all__ = ["contact_friction_ti"]
+
+
+@ti.func
+def contact_friction_ti(
+    theta,
+    last_slip,
+    slip,
+    f_trial,
+    f_n,
+    K,
+    dt,
+    A,
+    B,
+    mu0,
+    v_star,
+    t_c,
+    memory,
+    rule,
+    method: ti.template(),
+    tol: ti.template(),
+):
+    """Taichi twin of :func:`slip.contact_friction`; returns ``(mu, theta_new, V)``. ``tol`` is a
+    compile-time constant, ``slip.NEWTON_TOLERANCE`` of the precision."""
+    speed = ti.abs(slip)
+    theta_in = theta
+    if rule == RestRule.PAPER and last_slip * slip < 0.0:
+        theta_in = NO_INTERFACE
+    fresh = theta_in > NO_INTERFACE_ABOVE or memory == 0
+    new = theta_in > NEW_CONTACT_ABOVE or memory == 0
+    start = theta_in
+    if fresh:
+        start = 0.0
+    mu_low = mu0
+    theta_low = NO_INTERFACE
+    if not fresh and rule == RestRule.HEALING:
+        theta_low = theta_step_ti(theta_in, 0.0, 0.0, 0.0, dt, B, t_c, method)
+        mu_low = ti.max(mu0 + theta_low, 0.0)
+    elif not fresh and rule == RestRule.FROZEN:
+        theta_low = theta_in
+        mu_low = ti.max(mu0 + theta_in, 0.0)
+    elif fresh and memory != 0 and rule != RestRule.PAPER:
+        theta_low = 0.0
+    a = 0.0
+    b = -B
+    if not new:
+        a = theta_step_ti(start, 0.0, 0.0, 0.0, dt, B, t_c, method)
+        b = theta_step_ti(start, 1.0, 1.0, 1.0, dt, B, t_c, method) - a
+    c0 = mu0 + a
+    c1 = A + b
+    mu = mu_low
+    theta_new = theta_low
+    v = 0.0
+    if speed <= v_star or K * v_star + f_n * ti.max(c0, 0.0) - f_trial >= 0.0:
+        v = ti.min(ti.max(f_trial - mu_low * f_n, 0.0) / K, speed)
+    else:
+        y_s = log_any(speed / v_star)
+        y = y_s
+        capped = K * speed + f_n * ti.max(c0 + c1 * y_s, 0.0) - f_trial <= 0.0
+        if not capped:
+            mu_min = 0.0
+            if c1 >= 0.0:
+                mu_min = ti.max(c0, 0.0)
+            y = ti.min(log_any((f_trial - f_n * mu_min) / (K * v_star)), y_s)
+            for _ in range(NEWTON_ITERATIONS):
+                e = K * v_star * exp_any(y)
+                m = c0 + c1 * y
+                g = e + f_n * ti.max(m, 0.0) - f_trial
+                gp = e
+                if m > 0.0:
+                    gp += f_n * c1
+                dy = g / gp
+                y -= dy
+                if dy <= tol * (1.0 + y):
+                    break
+        theta_new = -B * y
+        if not new:
+            theta_new = theta_step_ti(start, y, y, y, dt, B, t_c, method)
+        mu = ti.max(mu0 + theta_new + A * y, 0.0)
+        v = speed
+        if not capped:
+            v = v_star * exp_any(y)
+    if slip < 0.0:
+        v = -v
+    return mu, theta_new, v

@@ -1,0 +1,248 @@
+"""Checkpoints: the whole state of a run, so that a killed run continues bit for bit.
+
+A checkpoint is an HDF5 file beside the run file (``RUN.h5.ckpt``), written whole to
+``RUN.h5.ckpt.tmp`` and then renamed over the last one (``os.replace``, atomic on POSIX): a
+kill at any instant leaves the previous checkpoint or the new one, never a part of one.
+
+What it holds is read from the engine, not listed here, so that it follows the state's
+declaration (``taichi_ice.engine.schema``) as fields come and go:
+
+- ``/data/<name>``: every field of the batch's mutable state (``World.data``: positions,
+  velocities, contact memory with theta and spring stretch, energy accumulators, probe
+  impulses, status word ...), as ``to_numpy`` gives it;
+- ``/nbr/<name>``: the neighbour lists (``World.neighbours``), so that they are rebuilt at the
+  same steps as in a run that was never stopped;
+- ``/host/initial_energy``: the energy table at t = 0 (the budget's starting capital);
+- attributes: ``steps``, ``time``, ``dt``, ``precision``, ``n_samples`` and ``n_frames``
+  (rows of each run file written when it was taken, JSON lists), ``scenarios`` and
+  ``frictions`` (JSON lists: a resume must be the same run), ``run_ids`` (the ``run_id`` of
+  each run file, JSON list: a resume must continue the same files), ``format_version`` and
+  ``written`` (UTC);
+- ``digest``: SHA-256 of every array and attribute above (``written`` aside). HDF5 keeps no
+  checksum of its data, so a flipped bit in a field would otherwise be restored into the
+  run and carried on silently; a checkpoint whose digest differs is refused.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from .. import provenance
+from ..errors import OutputError, RunFileError
+from ..scene.table import printable
+from .runfile_read import DAMAGE
+
+FORMAT_VERSION = "7"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+#                       3: a status word per world;
+#                       4: each contact's stick-spring energy, a severed energy column;
+#                       5: a body's rotation (body_rot) instead of its turned outline;
+#                       6: the neighbour lists' gaps and paths (nbr_gap, nbr_path);
+#                       7: a digest of everything in it (damage is refused, not restored)
+SUFFIX = ".ckpt"
+
+
+def path_for(run_path: str | Path) -> Path:
+    """The checkpoint of a run file: ``RUN.h5`` -> ``RUN.h5.ckpt``."""
+    return Path(f"{run_path}{SUFFIX}")
+
+
+def _fields(container) -> dict:
+    """``{name: Taichi field}`` of a ``state.Fields`` group."""
+    return {name: getattr(container, name) for name in container.names}
+
+
+def identity(sim) -> dict:
+    """What a resumed run must share with the run it continues (JSON-able)."""
+    return {
+        "scenarios": [s.text for s in sim.scenes],
+        "frictions": [json.dumps(s.friction.to_dict(), sort_keys=True) for s in sim.scenes],
+        "dt": float(sim.dt),
+        "precision": sim.precision,
+    }
+
+
+def write(sim, path: str | Path, n_samples, n_frames, run_ids=None) -> Path:
+    """Write ``sim``'s whole state to ``path`` atomically (write, fsync, rename);
+    ``run_ids``: the run files' ``run_id`` attributes, checked on resume."""
+    from .runfile import check_room
+
+    path = Path(path)
+    world = sim.world
+    tmp = path.with_name(path.name + ".tmp")
+    arrays = {
+        group: {name: field.to_numpy() for name, field in _fields(container).items()}
+        for group, container in (("data", world.data), ("nbr", world.neighbours))
+    }
+    size = sum(a.nbytes for g in arrays.values() for a in g.values())
+    # The last checkpoint stays until the new one is whole; a disk without room for both
+    # stops the run here, before the new one is begun.
+    check_room(path, 2 * size, "the checkpoint")
+    try:
+        _write(sim, tmp, arrays, run_ids, n_samples, n_frames)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+    except OSError as exc:
+        remove(tmp)
+        raise OutputError(
+            f"{path}: the checkpoint could not be written ({exc}); the last one is kept"
+        ) from None
+    os.replace(tmp, path)
+    return path
+
+
+def _write(sim, tmp: Path, arrays: dict, run_ids, n_samples, n_frames) -> None:
+    world = sim.world
+    with h5py.File(tmp, "w") as f:
+        for group, named in arrays.items():
+            g = f.create_group(group)
+            for name, array in named.items():
+                g.create_dataset(name, data=array)
+        f.create_group("host").create_dataset("initial_energy", data=sim.initial_energy)
+        ident = identity(sim)
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["written"] = provenance.now()
+        f.attrs["steps"] = int(world.steps)
+        f.attrs["time"] = float(world.time)
+        f.attrs["dt"] = ident["dt"]
+        f.attrs["precision"] = ident["precision"]
+        f.attrs["scenarios"] = json.dumps(ident["scenarios"])
+        f.attrs["frictions"] = json.dumps(ident["frictions"])
+        f.attrs["n_samples"] = json.dumps([int(n) for n in n_samples])
+        f.attrs["n_frames"] = json.dumps([int(n) for n in n_frames])
+        if run_ids is not None:
+            f.attrs["run_ids"] = json.dumps([str(r) for r in run_ids])
+        groups = {**arrays, "host": {"initial_energy": np.asarray(sim.initial_energy)}}
+        f.attrs["digest"] = digest(groups, dict(f.attrs))
+
+
+def digest(groups: dict, attrs: dict) -> str:
+    """SHA-256 of a checkpoint's arrays (``{group: {name: array}}``: names, dtypes, shapes
+    and bytes) and attributes (but ``written`` and ``digest``), in a fixed order."""
+    h = hashlib.sha256()
+    for group in sorted(groups):
+        for name in sorted(groups[group]):
+            a = np.ascontiguousarray(groups[group][name])
+            h.update(f"{group}/{name}:{a.dtype.str}:{a.shape}".encode())
+            h.update(a.tobytes())
+    for key in sorted(attrs):
+        if key not in ("written", "digest"):
+            value = attrs[key]
+            h.update(f"{key}={value.decode() if isinstance(value, bytes) else value}".encode())
+    return h.hexdigest()
+
+
+def read(path: str | Path) -> dict:
+    """A checkpoint as ``{"attrs": {...}, "data": {...}, "nbr": {...}, "host": {...}}``.
+
+    Raises:
+        RunFileError: no checkpoint, or not a checkpoint file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RunFileError(
+            f"{path}: no checkpoint to resume from; the run wrote none (run with "
+            "--checkpoint-every, e.g. 10min), or it was never started"
+        )
+    try:
+        with h5py.File(path, "r") as f:
+            out = {
+                "attrs": {
+                    k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()
+                }
+            }
+            for group in ("data", "nbr", "host"):
+                out[group] = {name: ds[()] for name, ds in f[group].items()}
+    except DAMAGE as exc:
+        reason = printable(str(exc).strip().splitlines()[0] if str(exc).strip() else exc)
+        raise RunFileError(
+            f"{path}: not a taichi-ice checkpoint, or a damaged one ({reason}); start anew "
+            "with --overwrite"
+        ) from None
+    if str(out["attrs"].get("format_version")) == FORMAT_VERSION:
+        groups = {g: out[g] for g in ("data", "nbr", "host")}
+        if out["attrs"].get("digest") != digest(groups, out["attrs"]):
+            raise RunFileError(
+                f"{path}: a damaged checkpoint (its contents do not match the digest written "
+                "with them); start anew with --overwrite"
+            )
+    # (Another format is refused by ``restore``, naming the versions.)
+    for key in ("scenarios", "frictions", "n_samples", "n_frames", "run_ids"):
+        if key == "run_ids" and key not in out["attrs"]:
+            continue  # written before run ids: the rows are still checked
+        try:
+            out["attrs"][key] = json.loads(out["attrs"][key])
+        except (KeyError, TypeError, ValueError):
+            raise RunFileError(
+                f"{path}: a damaged checkpoint (attribute {key} missing or unreadable); "
+                "start anew with --overwrite"
+            ) from None
+    return out
+
+
+def restore(sim, ckpt: dict, where: str | Path) -> None:
+    """Put a checkpoint's state into ``sim`` (same scenes, dt, precision: checked).
+
+    Raises:
+        RunFileError: the checkpoint is of another run, or its fields do not fit.
+    """
+    a = ckpt["attrs"]
+    if str(a.get("format_version")) != FORMAT_VERSION:
+        raise RunFileError(
+            f"{where}: the checkpoint is of format {a.get('format_version')}, written by another "
+            f"version of taichi-ice (this one reads format {FORMAT_VERSION}); resume it with "
+            "that version, or start anew with --overwrite"
+        )
+    ident = identity(sim)
+    # The law first: a scene's text holds its [friction] table, so another law (--friction)
+    # would otherwise be reported as another scene.
+    for key, now, then in (
+        ("friction law", ident["frictions"], a["frictions"]),
+        ("scene", ident["scenarios"], a["scenarios"]),
+        ("dt", ident["dt"], float(a["dt"])),
+        ("precision", ident["precision"], a["precision"]),
+    ):
+        if now != then:
+            raise RunFileError(
+                f"{where}: the checkpoint is of another run (its {key} differs from this "
+                "one's); resume with the same scene and options, or start anew with --overwrite"
+            )
+    world = sim.world
+    for group, container in (("data", world.data), ("nbr", world.neighbours)):
+        fields = _fields(container)
+        saved = ckpt[group]
+        if set(saved) != set(fields):
+            raise RunFileError(
+                f"{where}: the checkpoint's state ({sorted(set(saved) ^ set(fields))} differ) "
+                "is of another version of taichi-ice; start anew with --overwrite"
+            )
+        for name, field in fields.items():
+            array = np.asarray(saved[name])
+            if tuple(array.shape) != tuple(field.to_numpy().shape):
+                raise RunFileError(
+                    f"{where}: field {name} has shape {array.shape} in the checkpoint; this "
+                    "run's is other: start anew with --overwrite"
+                )
+            if tuple(field.shape) == ():  # a scalar field reads back as (1,)
+                field[None] = array.reshape(-1)[0].item()
+            else:
+                field.from_numpy(np.ascontiguousarray(array))
+    sim.initial_energy = np.asarray(ckpt["host"]["initial_energy"]).copy()
+    world.steps = int(a["steps"])
+    world.time = world.steps * world.dt
+
+
+def remove(path: str | Path) -> None:
+    """Delete a checkpoint (a run that completed needs none)."""
+    for p in (Path(path), Path(path).with_name(Path(path).name + ".tmp")):
+        with contextlib.suppress(FileNotFoundError):
+            p.unlink()
+
+
+__all__ = ["FORMAT_VERSION", "SUFFIX", "identity", "path_for", "read", "remove", "restore", "write"]

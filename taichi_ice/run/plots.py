@@ -1,0 +1,222 @@
+"""Figures of a run file: probe force, energy budget, bird's-eye snapshots, animation.
+
+Matplotlib is imported inside the functions (Agg backend), never at module level; the
+other figures of the package (``paper``, ``study``) draw through :func:`pyplot` and
+:func:`save_figure` here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..codes import BodyKind
+from .runfile_read import read_run
+
+KIND_COLOURS = {
+    BodyKind.DYNAMIC.label: "#9ecae1",
+    BodyKind.FIXED.label: "#7f7f7f",
+    BodyKind.KINEMATIC.label: "#fdae6b",
+}
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the Agg backend (files only, no window); every figure of the
+    package is drawn through it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def outlines(run: dict, frame: int) -> list[np.ndarray]:
+    """World outlines ``(n_i, 2)`` of every body at one frame of a run (from ``read_run``)."""
+    b, fr = run["bodies"], run["frames"]
+    off, verts = b["vertex_offsets"], b["vertices"]
+    pos, ang = fr["position"][frame], fr["angle"][frame]
+    out = []
+    for i in range(len(off) - 1):
+        v = verts[off[i] : off[i + 1]]
+        c, s = np.cos(ang[i]), np.sin(ang[i])
+        out.append(v @ np.array([[c, s], [-s, c]]) + pos[i])
+    return out
+
+
+def draw_bodies(ax, run: dict, frame: int, view: tuple | None = None) -> None:
+    """Filled outlines of every body at ``frame`` on ``ax``: walls grey, pushers orange.
+
+    ``view`` is ``(xmin, xmax, ymin, ymax)`` in m; default every body in full.
+    """
+    from matplotlib.collections import PolyCollection
+
+    kinds = run["bodies"]["kinds"]
+    polys = outlines(run, frame)
+    colours = [KIND_COLOURS.get(k, "#cccccc") for k in kinds]
+    ax.add_collection(PolyCollection(polys, facecolors=colours, edgecolors="k", linewidths=0.4))
+    if view is None:
+        pts = np.concatenate(polys)
+        view = (pts[:, 0].min(), pts[:, 0].max(), pts[:, 1].min(), pts[:, 1].max())
+    ax.set_xlim(view[0], view[1])
+    ax.set_ylim(view[2], view[3])
+    ax.set_aspect("equal")
+
+
+def plot_run(
+    path: str | Path, out_dir: str | Path | None = None, animate: bool = False, snapshots: int = 6
+) -> list[Path]:
+    """Write the figures of one run file; returns their paths.
+
+    Figures: ``<stem>_probe_force.png`` (force magnitude on each probe body against time),
+    ``<stem>_energy.png`` (every budget term and the residual), ``<stem>_positions.png``
+    (bird's-eye snapshots), and with ``animate`` ``<stem>.gif`` (blocks beside the probe force).
+    """
+    from .budget import DISSIPATED, HELD, residual
+
+    plt = pyplot()
+    path = Path(path)
+    out = Path(out_dir) if out_dir else path.parent
+    run = read_run(path)
+    if not len(run["series"]["time"]) or not len(run["frames"]["time"]):
+        from ..errors import UsageError
+
+        raise UsageError(
+            f"{path}: the run has no sample or frame yet (status {run['attrs']['status']}); "
+            "nothing to plot"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    s, names = run["series"], run["bodies"]["names"]
+    t = s["time"]
+    written = []
+    title = f"{path.stem}: {run['attrs'].get('friction', '')}, status {run['attrs']['status']}"
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    probes = run["bodies"]["probe_index"]
+    for k, idx in enumerate(probes):
+        ax.plot(t, np.linalg.norm(s["probe_force"][:, k], axis=-1) / 1e3, lw=0.8, label=names[idx])
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("contact force (kN)")
+    ax.set_title(title, fontsize=9)
+    if len(probes):
+        ax.legend(fontsize=8)
+    written.append(save_figure(fig, out / f"{path.stem}_probe_force.png"))
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for name in ("work_in", *HELD, *DISSIPATED):
+        if name in s and (name != "crushing_energy" or np.any(s[name])):  # crushing: if any
+            ax.plot(t, s[name], label=name.replace("_", " "))
+    ax.plot(t, residual(s), "k--", label="residual")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("energy (J)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=8, ncol=2)
+    written.append(save_figure(fig, out / f"{path.stem}_energy.png"))
+
+    n_frames = len(run["frames"]["time"])
+    picks = np.unique(np.linspace(0, n_frames - 1, min(snapshots, n_frames)).round().astype(int))
+    fig, axes = plt.subplots(1, len(picks), figsize=(2.4 * len(picks), 4), squeeze=False)
+    for ax, f in zip(axes[0], picks):
+        draw_bodies(ax, run, f)
+        ax.set_title(f"t = {run['frames']['time'][f]:.1f} s", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    written.append(save_figure(fig, out / f"{path.stem}_positions.png"))
+
+    if animate:
+        written.append(animate_run(run, out / f"{path.stem}.gif"))
+    return written
+
+
+def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
+    """GIF of the bodies beside the probe force, one image per frame."""
+    plt = pyplot()
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    s, fr = run["series"], run["frames"]
+    force = (
+        np.linalg.norm(s["probe_force"], axis=-1).sum(axis=-1) / 1e3
+        if s["probe_force"].size
+        else np.zeros_like(s["time"])
+    )
+    fig, (ax_b, ax_f) = plt.subplots(1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]})
+
+    def draw(f):
+        ax_b.clear()
+        draw_bodies(ax_b, run, f)
+        ax_b.set_title(f"t = {fr['time'][f]:.1f} s", fontsize=9)
+        ax_f.clear()
+        ax_f.plot(s["time"], force, lw=0.6, color="0.6")
+        now = s["time"] <= fr["time"][f]
+        ax_f.plot(s["time"][now], force[now], lw=0.9, color="C3")
+        ax_f.set_xlabel("time (s)")
+        ax_f.set_ylabel("probe force (kN)")
+
+    anim = FuncAnimation(fig, draw, frames=len(fr["time"]))
+    anim.save(path, writer=PillowWriter(fps=fps))
+    plt.close(fig)
+    return path
+
+
+def plot_spread(results: dict, path: Path, single: bool = False, titles=None, colours=None) -> Path:
+    """Each ensemble metric over the layouts, per law (box and dots).
+
+    Args:
+        results: ``{label: EnsembleResult}``.
+        single: world 0 of each result is the reference run: starred, not in the box.
+        titles, colours: per label (default the label, matplotlib's cycle).
+    """
+    plt = pyplot()
+    titles, colours = titles or {}, colours or {}
+    panels = (
+        ("peak_force", "peak force on probe (kN)", 1e-3, True),
+        ("friction_energy", "total frictional energy (J)", 1.0, True),
+        ("concentration", "largest share of frictional\nenergy lost in any 1 s", 1.0, False),
+    )
+    fig, axes = plt.subplots(1, len(panels), figsize=(12, 4))
+    labels = list(results)
+    first = 1 if single else 0
+    rng = np.random.default_rng(0)  # horizontal scatter of the dots, for legibility only
+    for ax, (name, ylabel, scale, log) in zip(axes, panels):
+        for x, label in enumerate(labels):
+            values = results[label].values(name) * scale
+            d = values[first:][np.isfinite(values[first:])]
+            colour = colours.get(label, f"C{x}")
+            if d.size:
+                ax.boxplot([d], positions=[x], widths=0.5, showfliers=False)
+                ax.scatter(x + rng.uniform(-0.15, 0.15, d.size), d, s=12, color=colour, zorder=3)
+            if single:
+                ax.scatter(
+                    [x],
+                    [values[0]],
+                    marker="*",
+                    s=140,
+                    color="red",
+                    edgecolor="k",
+                    zorder=4,
+                    label="single run" if x == 0 else None,
+                )
+        ax.set_xticks(range(len(labels)), [titles.get(k, k) for k in labels], fontsize=8)
+        ax.set_xlim(-0.6, len(labels) - 0.4)
+        ax.set_ylabel(ylabel)
+        if log and any(np.nanmax(r.values(name), initial=0) > 0 for r in results.values()):
+            ax.set_yscale("log")
+    n = len(results[labels[0]].seeds) - first
+    if single:
+        axes[0].legend(fontsize=8)
+    fig.suptitle(
+        f"Spread over {n} jittered layouts (dots)" + (", single runs starred" if single else ""),
+        fontsize=10,
+    )
+    return save_figure(fig, path)
+
+
+def save_figure(fig, path: Path) -> Path:
+    """Lay ``fig`` out, write it to ``path`` (PNG at 120 dpi), close it; return ``path``."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return path

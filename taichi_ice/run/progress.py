@@ -45,31 +45,58 @@ class StopRequest:
 
 
 class Progress:
-    """A one-line progress bar on stderr: simulated time, steps per second, time left."""
+    """A one-line progress bar on stderr: simulated time, steps per second, time left.
+
+    The first stride of a run compiles the kernels of a new layout (seconds to a minute on
+    2 cores; Taichi's offline cache makes it quicker the next time). The bar says so while it
+    waits (``compiling``) and counts its rate and time left from the end of that first
+    stride, so that the compile time does not make the estimate of the rest wrong.
+    """
 
     def __init__(self, total: int, dt: float, enabled: bool = True, width: int = 30):
         self.total, self.dt, self.enabled, self.width = max(total, 1), dt, enabled, width
         self.start = _time.perf_counter()
         self.last = 0.0
+        # Steps and clock when the first stride (and its compiling) ended; None before.
+        self.k0: int | None = None
+        self.t0 = 0.0
         # On a terminal the bar redraws in place; in a log file it is a line every 15 s.
         self.tty = sys.stderr.isatty()
         self.every = 0.2 if self.tty else 15.0
+
+    def compiling(self) -> None:
+        """Say, before the first stride, that the kernels compile first."""
+        if self.enabled:
+            sys.stderr.write(
+                "starting: the first stride compiles the kernels of a new layout "
+                "(once per layout) ...\n"
+            )
+            sys.stderr.flush()
 
     def update(self, k: int) -> None:
         if not self.enabled:
             return
         now = _time.perf_counter()
+        if self.k0 is None:  # the first stride is done: what took long was compiling
+            self.k0, self.t0 = k, now
+            sys.stderr.write(
+                f"first stride done in {now - self.start:.1f} s (compiling included); "
+                "the rate counts from here\n"
+            )
         if now - self.last < self.every and k < self.total:
             return
         self.last = now
         frac = k / self.total
-        rate = k / max(now - self.start, 1e-9)
-        eta = (self.total - k) / max(rate, 1e-9)
+        if k > self.k0 and now > self.t0:
+            rate = (k - self.k0) / (now - self.t0)
+            speed, eta = f"{rate:8.0f} steps/s", f"{(self.total - k) / rate:5.0f} s left"
+        else:
+            speed, eta = "      -- steps/s", "time left: after the next stride"
         filled = int(self.width * frac)
         start, end = ("\r", " ") if self.tty else ("", "\n")
         sys.stderr.write(
             f"{start}[{'#' * filled}{'.' * (self.width - filled)}] {100 * frac:5.1f}%  "
-            f"t = {k * self.dt:7.3f} s  {rate:8.0f} steps/s  {eta:5.0f} s left{end}"
+            f"t = {k * self.dt:7.3f} s  {speed}  {eta}{end}"
         )
         sys.stderr.flush()
 

@@ -1,9 +1,9 @@
 """Rubble-field throughput on the lattice box: ``taichi-ice bench --scene lattice``, f64, no Box2D.
 
 The paper's diamonds in zig-zag columns whose neighbours touch edge to edge, 54 % of a closed
-box (``taichi_ice.experiments.bench.scenes.lattice_scene``), at 1e3 to 1e5 blocks. Everything else,
-and
-every option, is ``taichi-ice bench`` (``taichi_ice.experiments.bench``) with these defaults.
+box (``taichi_ice.experiments.bench.scenes.lattice_scene``), at 1e3 to 1e5 blocks. Everything
+else, and every option, is ``taichi-ice bench`` (``taichi_ice.experiments.bench``) with these
+defaults.
 
     python benchmarks/rubble_field.py --out out/bench
     python benchmarks/rubble_field.py --sizes 1000 10000 100000 --steps 100 --law rate-state

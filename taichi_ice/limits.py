@@ -1,7 +1,7 @@
 """How big a scene may be: estimated before anything is allocated, refused with the estimate.
 
 A field of 1e7 blocks used to run for minutes, growing to 16 GB, before the machine killed
-it. ``check_size`` is called when a scene is read (``scenario``) and before a batch is
+it. ``check_size`` is called when a scene is read (``scene.parse``) and before a batch is
 allocated (``Simulation``), from the body count alone.
 """
 

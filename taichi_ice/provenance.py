@@ -1,6 +1,6 @@
 """Where a result came from: versions, git revision, command, host, and times, as attributes.
 
-Every run file carries these (``io.RunWriter``), so that a result found years later says
+Every run file carries these (``runfile.RunWriter``), so that a result found years later says
 which code, libraries and command made it, on which machine and when. The one place that
 asks git: the run files' ``git_revision`` and the benchmark's short ``git_describe``.
 """

@@ -1,7 +1,7 @@
 """TOML text in and out: ``tomllib`` (``tomli`` before Python 3.11) to read, ``tomli-w`` to write.
 
 The one place that knows which TOML library this Python has. Scene files are read here, and a
-scene built in code (or changed by ``scenario.reseeded`` / ``Scene.with_friction``) gets its
+scene built in code (or changed by ``scene.reseeded`` / ``Scene.with_friction``) gets its
 ``text`` from :func:`dump_toml`, which parses back to the same tables.
 """
 

@@ -1,5 +1,5 @@
-"""Batch assembly (taichi_ice.engine.assemble) and the energy budget (taichi_ice.run.budget), no
-kernels.
+"""Batch assembly (taichi_ice.engine.assemble) and the energy budget (taichi_ice.run.budget),
+no kernels.
 
 - A batch refuses worlds that disagree on what one set of kernels compiles in (ice, water,
   the state integrator: a batch mixing integrators once ran every world with the first

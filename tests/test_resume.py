@@ -151,7 +151,7 @@ def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp
 
 def jam_file(tmp_path):
     """The jam as a scene file, with two loose squares drifting at jittered speeds beside it:
-    every seed is another world (``scenario.reseeded``), the jam in each."""
+    every seed is another world (``scene.reseeded``), the jam in each."""
     raw = copy.deepcopy(dict(jam().raw))
     raw["field"] = [
         {

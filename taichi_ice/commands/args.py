@@ -1,7 +1,7 @@
 """Command-line value types: what ``type=`` of an argparse option calls.
 
 Each turns one option's text into its value or raises ``argparse.ArgumentTypeError`` with
-the message argparse prints. Shared by the subcommands' options (``cli``, ``cli_sweep``);
+the message argparse prints. Shared by the subcommands' options (``cli``, ``commands.sweep``);
 the options themselves, and the commands, are not here.
 """
 

@@ -1,5 +1,5 @@
 """``taichi-ice study``: its options and its body (the study itself is ``study`` and
-``study_report``)."""
+``study.report``)."""
 
 from __future__ import annotations
 

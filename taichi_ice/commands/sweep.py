@@ -4,8 +4,8 @@
     taichi-ice sweep --scene pillar --seeds 0-15 --friction coulomb:0.5 --out out/sweep
 
 Everything argparse of a sweep is here (``add_options``; ``add_cluster_options`` is shared
-with the study); the sweep file's format and checks are ``sweep_spec``'s, and running it
-``sweep_run``'s. ``cli`` wires this in as the ``sweep`` subcommand.
+with the study); the sweep file's format and checks are ``sweep.spec``'s, and running it
+``sweep.run``'s. ``cli`` wires this in as the ``sweep`` subcommand.
 """
 
 from __future__ import annotations

@@ -301,12 +301,11 @@ def ensemble_command(
     ``out/ensemble.png`` (the spread chart).
 
     Resumable (``taichi_ice.experiments.ledger``): ``out/ensemble-state.json`` records the options
-    and the
-    laws finished. ``resume`` reads the laws finished back from their files, continues the
+    and the laws finished. ``resume`` reads the laws finished back from their files, continues the
     interrupted one from its checkpoint (``checkpoint_every``: wall-clock seconds between
-    checkpoints of a law's batch, None for none) and runs the rest: every file equals that of
-    an ensemble never stopped (but the wall times). An earlier ensemble's output is refused
-    unless ``resume`` or ``overwrite``.
+    checkpoints of a law's batch, None for none) and runs the rest: every file equals that of an
+    ensemble never stopped (but the wall times). An earlier ensemble's output is refused unless
+    ``resume`` or ``overwrite``.
     """
     import csv
     import json

@@ -11,7 +11,7 @@ the parts done (their results are read back from their run files) and continues 
 was started from its Simulation's checkpoint (``checkpoint``), when it wrote one; a part
 started without a checkpoint runs again from its start. Without ``resume``, a folder that
 holds a ledger or any of the command's outputs is refused unless ``overwrite``. A lock beside
-the ledger (``io.RunLock``) keeps two commands out of one folder.
+the ledger (``output.RunLock``) keeps two commands out of one folder.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
     m = run_metrics(read_run("runs/pillar.h5")["series"], window=1.0)
 
 Pure NumPy definitions (no Taichi, no runs): ``ensemble`` computes them for every world of a
-batch, a sweep keeps the ones its file names (``sweep_spec``), its dataset takes their units
+batch, a sweep keeps the ones its file names (``sweep.spec``), its dataset takes their units
 and long names (``dataset``), the study and the paper read them. Running worlds is not here
 (``ensemble.run_worlds``).
 

@@ -3,7 +3,7 @@
 Holds the pillar scene the paper runs (``DEFAULT_SCENE``), its four friction models
 (``models``), the variants that separate rate from memory (``variants``), and the colour,
 title and finding of each model's label, which ``paper`` (the reproduction), its summary and
-figures, and ``study_report`` (the study's figures) share. Running and reporting live there,
+figures, and ``study.report`` (the study's figures) share. Running and reporting live there,
 not here.
 
 A model's label is its law's ``Law.label`` (``mu0.5``, ``rate-state_healing``): the tables

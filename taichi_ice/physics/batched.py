@@ -8,7 +8,7 @@ random inputs, for the benchmarks, and for studies that integrate thousands of i
   integrate the state equation with ``x = ln(max(V, v_star) / v_star)`` at every speed, which
   is ``RateState(below_v_star="healing").respond``; the paper's rule is a per-sample reset
   that ``RateState.respond`` applies;
-- ``overlap_batch_ti``: the overlap and separating-axis functions of ``geometry`` on many
+- ``overlap_batch_ti``: the overlap and separating-axis functions of ``polygon`` on many
   polygon pairs (``polygon.overlap`` and friends are the NumPy twins);
 - ``contact_friction_batch_ti``: the friction of many DEM contacts (``slip``);
 - ``rotation_batch_ti``: a body's rotation (``polygon_ti.rotation_ti``) of many angles.

@@ -168,7 +168,7 @@ class Body:
 
 @dataclass(frozen=True, eq=False)
 class FieldSpec:
-    """A ``[[field]]`` as written, kept so that ``scenario.reseeded`` can lay it out again.
+    """A ``[[field]]`` as written, kept so that ``scene.reseeded`` can lay it out again.
 
     Attributes:
         name: prefix of the block names (default ``field<i>``).

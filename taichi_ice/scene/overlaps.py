@@ -84,7 +84,7 @@ def find_overlaps(
     keep = dist < radius[a] + radius[b]
     a, b = a[keep], b[keep]
     # Batched separating-axis test: it clears touching lattice neighbours, so only pairs that
-    # really overlap reach the per-pair reference functions of ``geometry``.
+    # really overlap reach the per-pair reference functions of ``physics.polygon``.
     depth = _sat_depth(groups, group_of, row_of, pos, a, b)
     keep = depth > 1e-9 * (radius[a] + radius[b])
     a, b = a[keep], b[keep]

@@ -60,7 +60,7 @@ def _check_outputs(out: Path, name: str) -> None:
 
 
 def bench_command(args) -> int:
-    """Run the benchmark that ``args`` (the options of ``cli_bench.add_options``) describes;
+    """Run the benchmark that ``args`` (the options of ``commands.bench.add_options``) describes;
     1 if a size failed."""
     sizes = args.sizes or ([1_000] if args.quick else list(DEFAULT_SIZES))
     steps = args.steps or (QUICK_STEPS if args.quick else DEFAULT_STEPS)

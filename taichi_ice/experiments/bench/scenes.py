@@ -1,6 +1,6 @@
 """The benchmark scenes: the paper's diamonds in a closed box, as a lattice or at random angles.
 
-Both are scene tables (as for ``scenario.scene_from_dict``): diamond blocks 0.7 m across x and
+Both are scene tables (as for ``scene.scene_from_dict``): diamond blocks 0.7 m across x and
 1.0 m along y (the paper's, Table 1 ice: 0.3 m thick, 920 kg/m^3) inside four fixed walls,
 with random velocities. Coulomb friction (mu = 0.5) or rate-and-state (the paper's defaults);
 water drag optional.

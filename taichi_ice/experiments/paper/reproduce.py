@@ -16,10 +16,9 @@ Writes into DIR:
 - ``summary.json`` and ``summary.md``: per model the single run's metrics (see
   ``taichi_ice.experiments.ensemble``), the distribution over layouts, and whether the paper's
   findings hold across layouts.
-- ``paper-state.json``: the options and the parts finished (``taichi_ice.experiments.ledger``), so
-that
-  ``taichi-ice paper --out DIR --resume`` continues a reproduction that was stopped: Figure 3
-  and the models finished are read back, the model that was running continues from its
+- ``paper-state.json``: the options and the parts finished (``taichi_ice.experiments.ledger``),
+  so that ``taichi-ice paper --out DIR --resume`` continues a reproduction that was stopped:
+  Figure 3 and the models finished are read back, the model that was running continues from its
   checkpoint (``RUN.h5.ckpt`` beside its first run file, every ``CHECKPOINT_EVERY`` of wall
   clock), the rest run.
 

@@ -3,7 +3,7 @@
 ``build_summary`` gathers per model the single run's metrics, the distribution over the
 other layouts and the paper's findings tested layout by layout (``findings``);
 ``summary_markdown`` writes its tables for people. Running the models (``paper``) and the
-figures (``paper_figures``) live elsewhere.
+figures (``paper.figures``) live elsewhere.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The study's run and report: ``run_study`` (the sweep, then study.json, study.md and the
-figures), ``study_report`` and ``study_markdown``, and the three figures.
+figures), ``study.report`` and ``study_markdown``, and the three figures.
 
-The statistics and the claims they test are ``study``'s; the command line ``cli_study``'s.
+The statistics and the claims they test are ``study``'s; the command line ``commands.study``'s.
 """
 
 from __future__ import annotations

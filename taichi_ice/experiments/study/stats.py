@@ -32,7 +32,7 @@ effective mu) and ``study_phase_map.png`` (jam probability against area fraction
 
 This module holds the study's design (its models, area fractions, sweep) and statistics:
 the bootstrap, the table of runs, the summary, the claims and their carriers. Running it and
-writing its report and figures is ``study_report``'s; the command line ``cli_study``'s.
+writing its report and figures is ``study.report``'s; the command line ``commands.study``'s.
 """
 
 from __future__ import annotations

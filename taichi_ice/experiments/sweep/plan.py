@@ -11,7 +11,7 @@ padded with copies of its last world, where running them costs less than compili
 kernels again (``COMPILE_SECONDS``). Every world is bit-identical alone and in any batch,
 so the plan changes the cost, never a result.
 
-Reading the sweep is ``sweep_spec``'s; running the batches ``sweep_run``'s.
+Reading the sweep is ``sweep.spec``'s; running the batches ``sweep.run``'s.
 """
 
 from __future__ import annotations

@@ -16,10 +16,10 @@ short.
 
 Everything lands in the output folder as it completes: ``batches/batch-<id>.json`` (written
 whole or not at all), so a sweep that is interrupted and started again runs only the worlds
-no batch file holds. At the end ``sweep.nc`` (netCDF-4, ``taichi_ice.experiments.sweep.dataset``)
-holds one
-row per world: the metrics, with units and long names, the coordinates seed, law and every
-swept parameter, and which batch ran which world.
+no batch file holds. At the end ``sweep.nc`` (netCDF-4,
+``taichi_ice.experiments.sweep.dataset``) holds one row per world: the metrics, with units and
+long names, the coordinates seed, law and every swept parameter, and which batch ran which
+world.
 
 What a sweep is and how its file is checked is ``sweep_spec``'s; the command line is
 ``cli_sweep``'s.

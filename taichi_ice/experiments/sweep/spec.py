@@ -40,7 +40,7 @@ or further apart (spacing y), keeping the last row where it is (its distance to 
 lies ahead) and moving every kinematic body (the pusher) with the first row.
 
 This module reads and checks; it runs nothing. Cutting the worlds into batches is
-``sweep_plan``'s, running them ``sweep_run``'s, the command line ``cli_sweep``'s.
+``sweep.plan``'s, running them ``sweep.run``'s, the command line ``commands.sweep``'s.
 """
 
 from __future__ import annotations

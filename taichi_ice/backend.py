@@ -50,8 +50,8 @@ _START_LINE = "[Taichi] Starting on arch="
 
 # The element types of the engine's fields, by the names the state table (``schema``) and
 # ``precision`` use: one mapping to NumPy's and Taichi's types, here.
-DTYPES = ("f64", "f32", "i32", "i64")
 _NUMPY_TYPES = {"f64": "float64", "f32": "float32", "i32": "int32", "i64": "int64"}
+DTYPES = tuple(_NUMPY_TYPES)
 
 
 def numpy_dtype(name: str):

@@ -20,7 +20,6 @@ import threading
 from collections.abc import Sequence
 from typing import Any
 
-from .. import backend
 from .options import Options
 
 __all__ = ["POOL", "WorldPool"]
@@ -53,9 +52,7 @@ class WorldPool:
         from ..errors import UsageError
         from .world import World
 
-        options = Options() if options is None else options
-        if options.precision is None:
-            options = options.replace(precision=backend.resolve()[1])
+        options = (Options() if options is None else options).resolved()
         scenes = list(scenes)
         n_bodies = sum(len(s.bodies) for s in scenes)
         with self._lock:

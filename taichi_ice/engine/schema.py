@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import DTYPES as BACKEND_DTYPES
 from ..backend import numpy_dtype, taichi_dtype
 from ..codes import BodyEnergy, EnergyTerm, Status
 
@@ -55,7 +56,7 @@ FORCE_QUANTUM = 2.0**-24
 # Element types: "real" is the run's precision (f64 or f32); the rest are fixed. Energies and
 # impulses accumulate over a whole run in f64 whatever the precision, and forces are gathered
 # in 64-bit fixed point (FORCE_QUANTUM).
-DTYPES = ("real", "f64", "f32", "i32", "i64")
+DTYPES = ("real", *BACKEND_DTYPES)  # "real": the run's precision
 
 # Where a field's values come from at set-up: "host" (an array that assemble builds), or a
 # constant fill.

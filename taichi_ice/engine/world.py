@@ -116,7 +116,7 @@ class World:
             those of ``options``.
 
     Attributes:
-        options: the settings it was built with, precision resolved, ``stepping`` the one
+        options: the settings it was built with, arch and precision resolved, ``stepping`` the one
             chosen.
         team: the ``stepper.BodyTeam`` that steps bodies in parallel on the CPU, or None
             (worlds stepping, or a GPU: a kernel per stage and step). Setting it to None
@@ -129,9 +129,7 @@ class World:
     """
 
     def __init__(self, scenes: Sequence, options: Options | None = None, **changes):
-        options = options_of(options, changes)
-        if options.precision is None:
-            options = options.replace(precision=backend.resolve()[1])
+        options = options_of(options, changes).resolved()
         limit = backend.field_tree_limit()
         if limit is not None and backend.field_trees() + TREES_PER_WORLD > limit:
             raise UsageError(

@@ -66,11 +66,34 @@ def test_laws_mix_in_one_batch_each_with_its_own_row(pushed):
     assert only_coulomb.layout.coulomb and "world_A" not in only_coulomb.host
 
 
-def test_worlds_with_other_ice_are_refused(pushed):
-    """The [ice] table is shared by a batch."""
+def test_worlds_with_other_ice_values_share_a_layout(pushed):
+    """The [ice] table's values are model data: worlds that differ in them make one batch,
+    of the layout each has alone (one set of kernels), with each world's own columns; only
+    the crushing strength's presence, which compiles its cap in or out, must agree."""
     raw = dict(pushed.raw)
-    raw["ice"] = {**raw.get("ice", {}), "thickness": 0.5}
-    with pytest.raises(ValueError, match=r"world 1 .*\[ice\]"):
+    ice = {"thickness": 0.5, "contact_stiffness": 2e8, "contact_viscosity": 1e4}
+    raw["ice"] = {**raw.get("ice", {}), **ice, "tangential_stiffness": 0.3}
+    other = scene_from_dict(raw)
+    batch = assemble([pushed, other])
+    alone = assemble([other])
+    assert batch.layout == alone.layout.replace(
+        n_bodies=batch.layout.n_bodies,
+        n_worlds=2,
+        n_probes=batch.layout.n_probes,
+        n_small=batch.layout.n_small,
+        n_large=batch.layout.n_large,
+        n_local_verts=batch.layout.n_local_verts,
+    )
+    host = batch.host
+    assert host["world_contact_stiffness"].tolist() == [pushed.ice.contact_stiffness, 2e8]
+    assert host["world_contact_viscosity"].tolist() == [pushed.ice.contact_viscosity, 1e4]
+    assert host["world_tangential_stiffness"].tolist() == [pushed.ice.tangential_stiffness, 0.3]
+    # The thicker world's floes are heavier: masses are per body.
+    start = host["world_body_start"]
+    heavier = host["body_mass"][start[1] : start[2]]
+    np.testing.assert_allclose(heavier, alone.host["body_mass"])
+    raw["ice"] = {**raw["ice"], "crushing_strength": 1e6}
+    with pytest.raises(ValueError, match=r"world 1 .*crushing_strength"):
         assemble([pushed, scene_from_dict(raw)])
 
 

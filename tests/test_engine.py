@@ -582,7 +582,7 @@ def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping):
     batch.advance(400)  # one launch per list lifetime: stopped by either world's rebuild
     # The lists were rebuilt on the way (they record where): some launch stopped early.
     ref = batch.neighbours.nbr_ref_pos.to_numpy()[: batch.layout.n_bodies]
-    assert np.max(np.hypot(*(ref - start).T)) > 0.5 * batch.layout.skin
+    assert np.max(np.hypot(*(ref - start).T)) > 0.5 * float(batch.host.list_skin)
     for w, scene in enumerate(scenes):
         alone = World([scene], dt=dt, stepping=stepping)
         alone.advance(400)
@@ -594,6 +594,55 @@ def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping):
         np.testing.assert_array_equal(alone.omegas(), batch.omegas()[sl])
         # Energy terms are summed in float in candidate order: ascending ids, in any batch.
         np.testing.assert_array_equal(alone.energies()[0], batch.energies()[w])
+
+
+def with_ice(scene, **ice):
+    """``scene`` with its [ice] table's values changed."""
+    raw = copy.deepcopy(dict(scene.raw))
+    raw["ice"] = {**raw.get("ice", {}), **ice}
+    return scene_from_dict(raw)
+
+
+@pytest.mark.parametrize("stepping", ["worlds", "bodies"])
+def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
+    """The contact law's values are data, not code: two squares colliding with k_e and 4 k_e
+    (and other viscosity, stick spring and dashpot) run in one batch, on one layout (one set
+    of kernels), each exactly as alone; and each collision is its own clamped damped
+    oscillator (k = k_e L, c = k_v L, m_eff = m / 2: the closed form of the ODE, not the
+    engine), so the batch really ran two laws: the stiff one's contact is half as long."""
+    soft = two_squares()
+    stiff = with_ice(
+        soft,
+        contact_stiffness=4.0 * soft.ice.contact_stiffness,
+        contact_viscosity=0.5 * soft.ice.contact_viscosity,
+        tangential_stiffness=0.3,
+        tangential_damping=0.5,
+    )
+    dt = min(soft.stable_dt, stiff.stable_dt) / 40
+    batch = World([soft, stiff], dt=dt, stepping=stepping)
+    alone = [World([s], dt=dt, stepping=stepping) for s in (soft, stiff)]
+    assert alone[0].layout.replace(n_worlds=2, n_bodies=4, n_probes=2, n_small=4) == batch.layout
+    steps = round(0.02 / dt)
+    for world in (batch, *alone):
+        world.advance(steps)
+        world.check()
+    for w, one in enumerate(alone):
+        sl = batch.world_slices()[w]
+        np.testing.assert_array_equal(one.positions(), batch.positions()[sl])
+        np.testing.assert_array_equal(one.velocities(), batch.velocities()[sl])
+        np.testing.assert_array_equal(one.energies()[0], batch.energies()[w])
+    m_eff = float(soft.masses[0]) / 2.0
+    for w, scene in enumerate((soft, stiff)):
+        _, restitution = clamped_oscillator(
+            scene.ice.contact_stiffness, scene.ice.contact_viscosity, m_eff, 1.0
+        )
+        v = batch.velocities()[batch.world_slices()[w]]
+        assert (v[1, 0] - v[0, 0]) == pytest.approx(restitution, rel=0.02), scene.ice
+    durations = [
+        clamped_oscillator(s.ice.contact_stiffness, s.ice.contact_viscosity, m_eff, 1.0)[0]
+        for s in (soft, stiff)
+    ]
+    assert durations[1] == pytest.approx(durations[0] / 2, rel=0.05)
 
 
 @pytest.mark.parametrize("law", ["coulomb", "rate-state"])
@@ -625,7 +674,7 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law):
     n = by_worlds.layout.n_bodies
     ref = by_worlds.neighbours.nbr_ref_pos.to_numpy()[:n]
     moved = np.max(np.hypot(*(ref - start).T))
-    assert moved > 0.5 * by_worlds.layout.skin
+    assert moved > 0.5 * float(by_worlds.host.list_skin)
     assert contacts > 0
     for other in (by_bodies, by_kernels):
         np.testing.assert_array_equal(other.neighbours.nbr_ref_pos.to_numpy()[:n], ref)

@@ -83,9 +83,10 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     """Check that ``scenes`` can run as one batch and build its arrays.
 
     Args:
-        scenes: the worlds. They must share the ice properties, the water table (present or
-            not) and the integrator of theta (laws that have one); the friction laws (Coulomb,
-            rate-and-state and its variants), their parameters and everything else may
+        scenes: the worlds. They must share the water table (present or not), whether the
+            ice has a crushing strength, and the integrator of theta (laws that have one);
+            the friction laws (Coulomb, rate-and-state and its variants), their parameters,
+            the ice's values (stiffness, viscosity, strength, ...) and everything else may
             differ.
         options: the engine's settings (``options.Options``; default ``Options()``). Read
             here: ``dt`` and ``force_dt`` (``Options.time_step``), ``precision`` (None:
@@ -118,11 +119,15 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
         if options.slots is not None
         else DEFAULT_SMALL_SLOTS + min(int(large_per_world), LARGE_SLOTS)
     )
+    cell_size = sizes.pop("cell_size")
+    skin = SKIN_FRACTION * cell_size
+    arrays.update(_contact_values(scenes))
+    arrays["grid_inv_cell"] = np.array(1.0 / (cell_size + skin))
+    arrays["list_skin"] = np.array(skin)
     layout = Layout(
         **sizes,
         slots=slots,
         nbr_len=LIST_SLOTS * slots,
-        skin=SKIN_FRACTION * sizes["cell_size"],
         hash_size=hash_size_for(sizes["n_small"]),
         coulomb=coulomb,
         rate_state=not coulomb,
@@ -131,16 +136,12 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
         theta_method=int(ThetaMethod.from_label(methods.pop()))
         if methods
         else int(ThetaMethod.EXPONENTIAL),
-        contact_stiffness=first.ice.contact_stiffness,
-        contact_viscosity=first.ice.contact_viscosity,
-        tangential_stiffness=first.ice.tangential_stiffness,
-        tangential_damping=first.ice.tangential_damping,
         crushing=first.ice.crushing_strength is not None,
-        crushing_force=(first.ice.crushing_strength or 0.0) * first.ice.thickness,
-        runaway_step=_runaway_step(scenes),
         precision=options.precision or "f64",
         energy=options.energy,
     )
+    if not layout.crushing:
+        arrays.pop("world_crushing_force")
     if not layout.water:
         arrays.pop("body_drag_linear")
         arrays.pop("body_drag_rotational")
@@ -159,8 +160,11 @@ def _check_shared(scenes: tuple) -> None:
     first = scenes[0]
     for w, s in enumerate(scenes[1:], start=1):
         where = f"world {w} ({s.source}) differs from world 0 ({first.source}) in"
-        if s.ice != first.ice:
-            raise ValueError(f"{where} the [ice] table; all worlds of a batch share it")
+        if (s.ice.crushing_strength is None) != (first.ice.crushing_strength is None):
+            raise ValueError(
+                f"{where} whether the ice has a crushing_strength ([ice]); the kernels compile "
+                "the cap in or not, so all worlds of a batch have one or none"
+            )
         if s.water != first.water:
             raise ValueError(f"{where} the [water] table; all worlds of a batch share it")
     # The laws may mix (Coulomb, rate-and-state and its variants, any parameters); the
@@ -315,15 +319,30 @@ def _worlds(scenes: tuple, coulomb: bool) -> dict[str, np.ndarray]:
     return out
 
 
-def _runaway_step(scenes: tuple) -> float:
-    """m: RUNAWAY_STEP_FRACTION of the thinnest dynamic body's width, the most a dynamic body
-    may move in one step (the kernel compares it with ``|v| dt``, dt read at run time, so
-    that no dt is compiled in)."""
+def _contact_values(scenes: tuple) -> dict[str, np.ndarray]:
+    """Per-world values of the contact law (``[ice]``) and the runaway distance: model data,
+    not compiled in, so worlds of a batch may differ in them."""
+    ice = [s.ice for s in scenes]
+    return {
+        "world_contact_stiffness": np.array([i.contact_stiffness for i in ice], dtype=float),
+        "world_contact_viscosity": np.array([i.contact_viscosity for i in ice], dtype=float),
+        "world_tangential_stiffness": np.array([i.tangential_stiffness for i in ice], dtype=float),
+        "world_tangential_damping": np.array([i.tangential_damping for i in ice], dtype=float),
+        "world_crushing_force": np.array(
+            [(i.crushing_strength or 0.0) * i.thickness for i in ice], dtype=float
+        ),
+        "world_runaway_step": np.array([_runaway_step(s) for s in scenes], dtype=float),
+    }
+
+
+def _runaway_step(scene) -> float:
+    """m: RUNAWAY_STEP_FRACTION of the scene's thinnest dynamic body's width, the most a
+    dynamic body may move in one step (the kernel compares it with ``|v| dt``, dt read at
+    run time); inf for a scene with no dynamic body."""
     thinnest = math.inf
-    for s in scenes:
-        for b in s.bodies:
-            if b.kind == BodyKind.DYNAMIC.label:
-                thinnest = min(thinnest, polygon.min_width(b.vertices))
+    for b in scene.bodies:
+        if b.kind == BodyKind.DYNAMIC.label:
+            thinnest = min(thinnest, polygon.min_width(b.vertices))
     if not math.isfinite(thinnest):
         return math.inf
     return RUNAWAY_STEP_FRACTION * thinnest

@@ -55,6 +55,7 @@ class SpatialHash(Fields, Stage):
                 "body_small",
                 "body_world",
                 "body_pos",
+                "grid_inv_cell",
                 "bucket_count",
                 "bucket_end",
                 "block_total",
@@ -67,16 +68,15 @@ class SpatialHash(Fields, Stage):
         super().__init__(layout, schema.groups()["hash"])
         self.model, self.data = model, data
         h = layout.hash_size
-        # Bodies whose circles come within the skin are at most a cell apart.
-        self.inv_cell = 1.0 / (layout.cell_size + layout.skin)
         self.mask = h - 1
         self.n_blocks = layout.size("scan_blocks")
 
     @ti.func
     def cell_of(self, pos):
-        return ti.Vector(
-            [ti.floor(pos[0] * self.inv_cell, ti.i32), ti.floor(pos[1] * self.inv_cell, ti.i32)]
-        )
+        """The hash cell of a position: cells are a body's diameter plus the skin, so bodies
+        whose circles come within the skin are at most a cell apart."""
+        inv_cell = self.model.grid_inv_cell[None]
+        return ti.Vector([ti.floor(pos[0] * inv_cell, ti.i32), ti.floor(pos[1] * inv_cell, ti.i32)])
 
     @ti.kernel
     def build(self):
@@ -118,7 +118,7 @@ class NeighbourList(Fields):
     steps (a Verlet list).
 
     A body's list holds the partners of its world it owns whose bounding circles come within
-    ``layout.skin`` of its own, in ascending id (``ContactStage.build_list``, or
+    the skin (``list_skin``) of its own, in ascending id (``ContactStage.build_list``, or
     ``build_lists`` through the hash). As long as no body of the world has moved more than
     half the skin since (``Integrator.moved``), no
     pair outside the lists can have come into contact, so each step only filters its list by

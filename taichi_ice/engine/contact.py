@@ -70,7 +70,7 @@ from ..physics.polygon_ti import facing_gap_ti, overlap_normals_ti
 from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE
 from ..physics.slip_ti import contact_friction_ti
 from .contact_lists import ContactLists
-from .schema import FORCE_QUANTUM, Layout, law_columns
+from .schema import FORCE_QUANTUM, Layout, contact_columns, law_columns
 from .stages import Access
 from .state import Data, Model, quantum_dtype
 
@@ -90,6 +90,7 @@ class ContactStage(ContactLists):
                 "vert_local",
                 "vert_normal_local",
                 *law_columns(),
+                *contact_columns(),
                 "body_inv_mass",
                 "body_inv_inertia",
                 # Neighbour lists
@@ -151,6 +152,7 @@ class ContactStage(ContactLists):
         ),
         "build_lists": Access(
             reads=(
+                "list_skin",
                 "body_world",
                 "body_kind",
                 "body_small",
@@ -187,11 +189,6 @@ class ContactStage(ContactLists):
     def __init__(self, layout: Layout, model: Model, data: Data, spatial_hash, neighbours):
         self.layout, self.model, self.data = layout, model, data
         self.hash, self.neighbours = spatial_hash, neighbours
-        self.k_e = float(layout.contact_stiffness)
-        self.k_v = float(layout.contact_viscosity)
-        self.ratio = float(layout.tangential_stiffness)
-        self.zeta = float(layout.tangential_damping)
-        self.crush = float(layout.crushing_force)
         self.tol = NEWTON_TOLERANCE[layout.precision]
         self.method = int(layout.theta_method)
         self.maxv = layout.max_verts
@@ -258,6 +255,9 @@ class ContactStage(ContactLists):
         if not separated:
             area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
         if area > 0.0:
+            # The world's contact law (model data: worlds of a batch may differ in it).
+            w = m.body_world[i]
+            k_e, k_v = m.world_contact_stiffness[w], m.world_contact_viscosity[w]
             # point is relative to body i
             r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)
             v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
@@ -272,10 +272,8 @@ class ContactStage(ContactLists):
             cap_n = 0.0
             crushed_new = crushed
             if ti.static(self.layout.crushing):
-                cap_n, crushed_new = crush_ti(area, crushed, width, self.k_e, self.crush)
-            f_n, f_el = normal_force_ti(
-                ti.max(area - crushed_new, 0.0), width, approach, self.k_e, self.k_v
-            )
+                cap_n, crushed_new = crush_ti(area, crushed, width, k_e, m.world_crushing_force[w])
+            f_n, f_el = normal_force_ti(ti.max(area - crushed_new, 0.0), width, approach, k_e, k_v)
             crush_work = 0.0
             if ti.static(self.layout.crushing):
                 f_n = ti.min(f_n, cap_n)
@@ -284,10 +282,10 @@ class ContactStage(ContactLists):
 
             # Tangential: a stick spring proportional to the contact width and a dashpot
             # that damps it to a fraction of critical, ``tangential_damping_ti``.
-            k_t = self.ratio * self.k_e * width
+            k_t = m.world_tangential_stiffness[w] * k_e * width
             c_t = tangential_damping_ti(
                 k_t,
-                self.zeta,
+                m.world_tangential_damping[w],
                 m.body_inv_mass[i],
                 m.body_inv_inertia[i] * cross2(r_i, tangent) ** 2,
                 m.body_inv_mass[j],
@@ -296,7 +294,6 @@ class ContactStage(ContactLists):
             mu = 0.0
             theta_new = 0.0
             slip_rate = 0.0
-            w = m.body_world[i]
             if ti.static(self.layout.rate_state):
                 f_trial = ti.abs(k_t * (xi + slip * dt) + c_t * slip)
                 mu, theta_new, slip_rate = contact_friction_ti(

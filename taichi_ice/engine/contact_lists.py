@@ -150,7 +150,7 @@ class ContactLists(Stage):
         not lie wholly beyond one of its faces); returns the new count, which may pass the
         list's length (reported by ``end_list``)."""
         m, d, nb = ti.static((self.model, self.data, self.neighbours))
-        skin = ti.static(self.layout.skin)
+        skin = m.list_skin[None]
         if j != i and self.wants(i, j):
             reach = m.body_radius[i] + m.body_radius[j] + skin
             if (d.body_pos[j] - d.body_pos[i]).norm_sqr() < reach * reach:

@@ -52,7 +52,10 @@ class Integrator(Stage):
                 "body_pos",
                 "body_angle",
                 "body_energy",
+                # Per world: how far a step may move a body
+                "world_runaway_step",
                 # Neighbour lists: has the body moved half the skin?
+                "list_skin",
                 "body_small",
                 "body_radius",
                 "body_world",
@@ -84,10 +87,6 @@ class Integrator(Stage):
     def __init__(self, layout: Layout, model: Model, data: Data, neighbours):
         self.layout, self.model, self.data = layout, model, data
         self.neighbours = neighbours
-        # A dynamic body that moves farther than this in a step (m) flags the run as diverged
-        # (assemble); the step compares it with |v| dt, dt read at run time.
-        self.runaway_step = float(layout.runaway_step)
-        self.half_skin = 0.5 * float(layout.skin)
 
     @ti.kernel
     def orient(self):
@@ -143,7 +142,7 @@ class Integrator(Stage):
     def moving(self, i):
         """Mark body i's world's lists stale if it has moved half their skin."""
         m, nb = ti.static((self.model, self.neighbours))
-        if self.moved(i) > self.half_skin:
+        if self.moved(i) > 0.5 * ti.cast(m.list_skin[None], ti.f64):
             nb.world_nbr_stale[m.body_world[i]] = 1
             nb.nbr_rebuild[None] = 1
 
@@ -194,10 +193,11 @@ class Integrator(Stage):
             self.turn(i)
             self.moving(i)
             speed2 = v1.norm_sqr()
+            w = m.body_world[i]
             if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
-                d.status[m.body_world[i], Status.NONFINITE] = 1
-            elif speed2 * dt * dt > self.runaway_step * self.runaway_step:
-                d.status[m.body_world[i], Status.RUNAWAY] = 1
+                d.status[w, Status.NONFINITE] = 1
+            elif speed2 * dt * dt > m.world_runaway_step[w] * m.world_runaway_step[w]:
+                d.status[w, Status.RUNAWAY] = 1
         elif kind == BodyKind.KINEMATIC:
             # The contact force f acts on the pusher; the pusher does -f.v on the rest.
             v, w = d.body_vel[i], d.body_omega[i]

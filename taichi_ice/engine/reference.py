@@ -69,10 +69,11 @@ class ReferenceModel:
         drag: ``(N, 2)`` water drag coefficients (kg/m, kg m^2), or None with no water.
         laws: the friction of each world, rebuilt from its model columns: a Coulomb mu
             (float) when every world is Coulomb, else a world's rate-and-state columns.
-        k_e (N/m^2), k_v (Pa s): normal contact parameters. ratio: tangential to normal
-            stiffness. zeta: the tangential dashpot's fraction of critical damping.
+        k_e (N/m^2), k_v (Pa s): normal contact parameters, ``(W,)`` one per world. ratio:
+            tangential to normal stiffness, ``(W,)``. zeta: the tangential dashpot's
+            fraction of critical damping, ``(W,)``.
         method: ``codes.ThetaMethod`` for theta (one per batch).
-        crushing_force: strength x thickness (N/m), or None.
+        crushing_force: ``(W,)`` strength x thickness (N/m), or None.
         tol: Newton's tolerance of the sliding rate.
         quantum: force resolution of the gather (N); None sums in floating point.
     """
@@ -85,13 +86,13 @@ class ReferenceModel:
     force_ext: np.ndarray
     drag: np.ndarray | None
     laws: tuple
-    k_e: float
-    k_v: float
-    ratio: float
-    zeta: float = 0.25
+    k_e: np.ndarray
+    k_v: np.ndarray
+    ratio: np.ndarray
+    zeta: np.ndarray
     method: int = ThetaMethod.EXPONENTIAL
     quantum: float | None = FORCE_QUANTUM
-    crushing_force: float | None = None
+    crushing_force: np.ndarray | None = None
     tol: float = NEWTON_TOLERANCE["f64"]
 
     @property
@@ -129,13 +130,13 @@ class ReferenceModel:
             if layout.water
             else None,
             laws=laws,
-            k_e=layout.contact_stiffness,
-            k_v=layout.contact_viscosity,
-            ratio=layout.tangential_stiffness,
-            zeta=layout.tangential_damping,
+            k_e=host.world_contact_stiffness,
+            k_v=host.world_contact_viscosity,
+            ratio=host.world_tangential_stiffness,
+            zeta=host.world_tangential_damping,
             method=layout.theta_method,
             quantum=quantum,
-            crushing_force=layout.crushing_force if layout.crushing else None,
+            crushing_force=host.world_crushing_force if layout.crushing else None,
             tol=NEWTON_TOLERANCE[layout.precision],
         )
 
@@ -256,6 +257,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             if i == j or model.world[i] != model.world[j] or not owns(model.kind, i, j):
                 continue
             # In the owner's frame, as the kernel clips.
+            w = int(model.world[i])
             origin = state.pos[i]
             c = contact_force(
                 outline(model, state, i, origin),
@@ -267,18 +269,20 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 state.vel[j],
                 state.omega[j],
                 dt=dt,
-                k_e=model.k_e,
-                k_v=model.k_v,
-                ratio=model.ratio,
-                law=model.laws[model.world[i]],
+                k_e=float(model.k_e[w]),
+                k_v=float(model.k_v[w]),
+                ratio=float(model.ratio[w]),
+                law=model.laws[w],
                 inv_mass=(model.inv_mass(i), model.inv_mass(j)),
                 inv_inertia=(model.inv_inertia(i), model.inv_inertia(j)),
-                zeta=model.zeta,
+                zeta=float(model.zeta[w]),
                 dvel=(state.dvel[i], state.dvel[j]),
                 domega=(float(state.domega[i]), float(state.domega[j])),
                 memory=state.contacts.get((i, j)),
                 method=model.method,
-                crushing_force=model.crushing_force,
+                crushing_force=None
+                if model.crushing_force is None
+                else float(model.crushing_force[w]),
                 tol=model.tol,
             )
             if c is None:

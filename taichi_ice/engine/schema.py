@@ -118,6 +118,18 @@ def law_columns() -> tuple[str, ...]:
     return tuple(v.name for v in _law_params())
 
 
+def contact_columns() -> tuple[str, ...]:
+    """The model columns of the contact law's values (``[ice]``), one per world: what a stage
+    that evaluates contact forces reads (its ``ACCESS``)."""
+    return (
+        "world_contact_stiffness",
+        "world_contact_viscosity",
+        "world_tangential_stiffness",
+        "world_tangential_damping",
+        "world_crushing_force",
+    )
+
+
 def _law_params():
     # The friction laws own their parameters (names, units, meaning): one model column per
     # parameter, so adding a parameter to a law adds its column here.
@@ -195,6 +207,16 @@ MODEL: tuple[Var, ...] = (
     Var("world_body_start", "i32", ("world_edges",), "id", "first body of each world (bodies are world-major)", role="cold", init=HOST),
     Var("large_ids", "i32", ("n_large",), "id", "large bodies, world by world", role="cold", init=HOST),
     Var("world_large_start", "i32", ("world_edges",), "id", "first large body of each world in large_ids", role="cold", init=HOST),
+    # The contact law's values, data not code: worlds of one batch may differ in them, and a
+    # scene of another stiffness runs on kernels compiled for one of its kind.
+    Var("world_contact_stiffness", "real", ("n_worlds",), "N/m^2", "k_e, N/m per m of contact width ([ice] contact_stiffness)", role="cold", init=HOST),
+    Var("world_contact_viscosity", "real", ("n_worlds",), "Pa s", "k_v, Pa s per m of contact width ([ice] contact_viscosity)", role="cold", init=HOST),
+    Var("world_tangential_stiffness", "real", ("n_worlds",), "", "k_t / (k_e L): the stick spring's ratio to the normal one ([ice] tangential_stiffness)", role="cold", init=HOST),
+    Var("world_tangential_damping", "real", ("n_worlds",), "", "the stick spring's dashpot as a fraction of critical ([ice] tangential_damping)", role="cold", init=HOST),
+    Var("world_crushing_force", "real", ("n_worlds",), "N/m", "strength x thickness: the elastic normal force's cap per m of contact width", role="cold", when="crushing", init=HOST),
+    Var("world_runaway_step", "real", ("n_worlds",), "m", "a dynamic body that moves farther in one step flags its world as diverged (RUNAWAY_STEP_FRACTION of its thinnest dynamic body; inf if none)", role="cold", init=HOST),
+    Var("grid_inv_cell", "f64", (), "1/m", "1 / the spatial hash's cell edge (the largest small body's diameter plus the skin)", role="cold", init=HOST),
+    Var("list_skin", "real", (), "m", "margin of the neighbour lists: a pair is listed when its bounding circles come within it, a world's lists rebuilt when a body has moved half of it", role="cold", init=HOST),
 )
 
 # Mutable (MuJoCo Warp's Data).
@@ -278,13 +300,16 @@ class Layout:
     """Sizes and compile-time switches of a batch (plain Python values; MuJoCo's Option).
 
     Kernels specialise on everything here (``ti.static``): two batches with the same layout
-    share compiled kernels.
+    share compiled kernels. Values are not here: the contact law's stiffnesses, dashpots and
+    strength, the runaway distance, the hash's cell and the lists' skin are model fields
+    (``world_contact_stiffness``, ..., ``grid_inv_cell``, ``list_skin``), and dt is
+    ``time_step``, so a scene of another stiffness or floe size, or a run at another dt,
+    takes the kernels compiled for the first of its kind.
 
     Attributes:
         n_bodies, n_local_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size: sizes
             (see the module table).
         max_verts: most vertices of any body (the kernels' local outline matrices).
-        cell_size: edge of a hash cell (m), the diameter of the largest small body.
         coulomb, rate_state: the batch's friction: every world Coulomb (``world_mu``), or
             rate-and-state columns for every world (``friction.contact_row``: the
             rate-and-state laws, and Coulomb worlds as A = B = 0).
@@ -292,26 +317,13 @@ class Layout:
         force_ext: some body has a constant external force (``body_force_ext``); without
             one the field is not allocated (16 B a body at f64) and the step adds none.
         theta_method: ``codes.ThetaMethod`` of the state variable (one per batch).
-        contact_stiffness: ``k_e``, N/m per m of contact width (shared by the batch).
-        contact_viscosity: ``k_v``, Pa s per m of contact width.
-        tangential_stiffness: ratio of the tangential stick spring to the normal one; a
-            contact of width L has ``k_t = ratio k_e L``.
-        tangential_damping: the tangential dashpot as a fraction of critical damping of the
-            stick spring at the pair's mass along the tangent (``contact_law.tangential_damping``).
-        crushing: the ice's strength caps the normal force (``[ice] crushing_strength``).
-        crushing_force: strength x thickness (N per m of contact width): the cap is this
-            times the contact width.
-        runaway_step: a dynamic body that moves farther than this in one step (m) flags the
-            run as diverged (its speed is compared with runaway_step / dt at run time: no dt
-            is compiled in, and a World reloads at another dt).
+        crushing: the ice's strength caps the normal force (``[ice] crushing_strength``; its
+            value per world is ``world_crushing_force``).
         precision: ``"f64"`` or ``"f32"``, the type of every ``real`` field.
         energy: the energy budget is kept (``body_energy``, the contacts' stored elastic
             energy, ``world_energy``); off, no kernel computes or stores a term of it, and
             the samples' energy columns are NaN.
         nbr_len: entries of a body's neighbour list.
-        skin: margin (m) of the neighbour lists: a pair is listed when its bounding circles
-            come within ``skin`` of each other, and a world's lists are rebuilt when one of
-            its bodies has moved ``skin / 2``.
     """
 
     n_bodies: int
@@ -323,23 +335,15 @@ class Layout:
     slots: int
     hash_size: int
     max_verts: int
-    cell_size: float
     coulomb: bool
     rate_state: bool
     water: bool
     theta_method: int
-    contact_stiffness: float
-    contact_viscosity: float
-    tangential_stiffness: float
-    tangential_damping: float
     crushing: bool
-    crushing_force: float
-    runaway_step: float
     precision: str = "f64"
     energy: bool = True
     force_ext: bool = True
     nbr_len: int = 1
-    skin: float = 0.0
 
     @property
     def real(self):
@@ -420,7 +424,7 @@ class HostArrays(Mapping):
         for name, v in wanted.items():
             shape = layout.shape(v) + ((v.lanes,) if v.lanes > 1 else ())
             dtype = v.np_dtype("f64")  # assembled in float64; upload casts reals
-            a = np.ascontiguousarray(arrays[name], dtype=dtype)
+            a = np.asarray(arrays[name], dtype=dtype, order="C")  # (0-d stays 0-d)
             if a.shape != shape:
                 raise ValueError(f"host array {name}: shape {a.shape}, declared {shape}")
             a.flags.writeable = False

@@ -132,7 +132,9 @@ def upload(model: Model, data: Data, host: HostArrays) -> None:
             continue
         group = model if hasattr(model, v.name) else data
         array = np.ascontiguousarray(host[v.name], dtype=v.np_dtype(layout.precision))
-        if array.size:
+        if not v.shape:  # a scalar field
+            getattr(group, v.name)[None] = array.item()
+        elif array.size:
             getattr(group, v.name).from_numpy(array)
 
 

@@ -32,7 +32,7 @@ from .broadphase import NeighbourList
 from .contact import ContactStage
 from .energy import EnergyMeter
 from .integrate import Integrator
-from .schema import Layout, law_columns
+from .schema import Layout, contact_columns, law_columns
 from .stages import Access, Stage
 from .state import Data, Model
 
@@ -92,6 +92,9 @@ class WorldStepper(Stage):
                 "world_body_start",
                 "world_nbr_stale",
                 *law_columns(),
+                *contact_columns(),
+                "world_runaway_step",
+                "list_skin",
             ),
             writes=(
                 "body_angle",

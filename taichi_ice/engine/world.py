@@ -338,7 +338,8 @@ class World:
                 "diverged: lower dt (or the scene's dt_safety)"
             )
         raise DivergenceError(
-            f"a body moved faster than {self.layout.runaway_step / self.dt:.3g} m/s (a quarter "
+            f"a body moved faster than {self.host.world_runaway_step[w] / self.dt:.3g} m/s "
+            "(a quarter "
             f"of the thinnest block per step){where} at t = {time:.4g} s (dt = {self.dt:.3g} "
             f"s, stability limit {self.stable_dt:.3g} s); the run diverged: lower dt (or the "
             "scene's dt_safety)"

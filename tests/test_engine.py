@@ -202,15 +202,25 @@ def two_squares(gap: float = 1e-3, v_left: float = 0.7, v_right: float = -0.3):
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("law", "water"), [("coulomb", False), ("rate-state", True)])
-def test_world_matches_numpy_reference_step(f64, law, water):
-    """Every body of six random 2-5 block worlds follows the plain NumPy step for 100 steps."""
+@pytest.mark.parametrize(
+    ("law", "water", "integrator"),
+    [
+        ("coulomb", False, "euler"),
+        ("rate-state", True, "euler"),
+        ("coulomb", False, "analytic"),
+        ("rate-state", True, "analytic"),
+    ],
+)
+def test_world_matches_numpy_reference_step(f64, law, water, integrator):
+    """Every body of six random 2-5 block worlds follows the plain NumPy step for 100 steps,
+    with either integrator (the analytic one at 4 times the step: each contact's onset,
+    stick, slip and end solved over fewer steps)."""
     scenes = [
         scene_from_dict(cluster_scene_dict(seed, 2 + seed % 4, law=law, water=water))
         for seed in range(6)
     ]
-    dt = min(s.dt for s in scenes)
-    world = World(scenes, dt=dt)
+    dt = min(s.dt for s in scenes) * (4.0 if integrator == "analytic" else 1.0)
+    world = World(scenes, dt=dt, integrator=integrator)
     # The twin reads the arrays the World uploaded: a parameter is derived once for both.
     model = ReferenceModel.from_batch(world.batch)
     state = ReferenceState.from_batch(world.batch)
@@ -255,14 +265,20 @@ def test_world_matches_numpy_reference_step(f64, law, water):
 # --------------------------------------------------------------------------------------------
 
 
-def collide(scene, dt: float, run_opts: dict) -> tuple[float, float, np.ndarray]:
-    """Overlap duration (s, crossings interpolated), restitution, momentum drift (N s)."""
-    sim = Simulation(scene, dt=dt, **run_opts)
+def collide(
+    scene, dt: float, run_opts: dict, from_final: bool = False, **options
+) -> tuple[float, float, np.ndarray]:
+    """Overlap duration (s, crossings interpolated), restitution, momentum drift (N s).
+    ``from_final``: the touch and the separation found by flying the first state forward
+    and the final one back (exact while the two fly freely, even when the touch falls on a
+    step or the force ended inside the last step with overlap)."""
+    sim = Simulation(scene, dt=dt, **run_opts, **options)
     mass = scene.masses
     momentum0 = (mass[:, None] * sim.velocities()).sum(axis=0)
     width = 1.0
     depth, drift = [], []
     v0 = sim.velocities()[0, 0] - sim.velocities()[1, 0]
+    pos0 = sim.positions()
     while True:
         sim.step()
         pos, vel = sim.positions(), sim.velocities()
@@ -279,6 +295,9 @@ def collide(scene, dt: float, run_opts: dict) -> tuple[float, float, np.ndarray]
     t_in = t[first - 1] + (0.0 - depth[first - 1]) / (depth[first] - depth[first - 1]) * sim.dt
     t_out = t[last] + (0.0 - depth[last]) / (depth[last + 1] - depth[last]) * sim.dt
     vel = sim.velocities()
+    if from_final:
+        t_in = (pos0[1, 0] - pos0[0, 0] - width) / v0
+        t_out = t[-1] - depth[-1] / (vel[0, 0] - vel[1, 0])
     restitution = (vel[1, 0] - vel[0, 0]) / v0
     return t_out - t_in, restitution, np.max(np.abs(drift))
 
@@ -317,6 +336,65 @@ def test_face_on_collision_is_a_clamped_damped_oscillator(run_opts, precision):
     assert e_fine < COLLISION_RESTITUTION_RTOL
     assert t_fine < FIRST_ORDER_RATIO * t_coarse
     assert e_fine < FIRST_ORDER_RATIO * e_coarse
+
+
+def test_analytic_face_on_collision_is_exact_at_any_step(run_opts, precision):
+    """The analytic step solves each contact's spring-dashpot over the step (issue 30): the
+    face-on collision, a single contact whose force is linear in the overlap, comes out as
+    the clamped damped oscillator's (SciPy's ODE, not the engine) to round-off at 0.8 and
+    1.6 times the explicit step's stability limit, where the Euler step is 4 % and 10 % off
+    in restitution or diverges."""
+    scene = two_squares()
+    m_eff = float(scene.masses[0]) / 2.0
+    duration, restitution = clamped_oscillator(
+        scene.ice.contact_stiffness, scene.ice.contact_viscosity, m_eff, 1.0
+    )
+    rtol = {"f64": 1e-8, "f32": 2e-4}[precision]
+    for ratio in (0.8, 1.6):
+        t, e, drift = collide(
+            scene,
+            ratio * scene.stable_dt,
+            run_opts,
+            from_final=True,
+            integrator="analytic",
+            force_dt=True,
+        )
+        print(
+            f"{ratio} stable_dt: duration {t / duration - 1:+.1e}, "
+            f"restitution {e / restitution - 1:+.1e}"
+        )
+        assert t == pytest.approx(duration, rel=rtol)
+        assert e == pytest.approx(restitution, rel=rtol)
+        assert drift <= MOMENTUM_RTOL[precision] * float(scene.masses[0])
+
+
+def test_analytic_offset_collision_converges_at_second_order(f64, run_opts):
+    """The offset collision turns both bodies and slides (Coulomb): the analytic step is no
+    longer exact there, but its restitution converges at second order to the ODE of the same
+    contact law (``collision_ode``, SciPy), where the Euler step's converges at first, and
+    is closer at each step."""
+    from taichi_ice.experiments.validation import collision_ode, dem_scenes
+
+    scene = dem_scenes.collision(dem_scenes.OFFSET, "coulomb")
+    end = dem_scenes.COLLISION_END
+    ode = collision_ode.solve_collision(scene, end)
+    want = ode["velocity"][1, 0] - ode["velocity"][0, 0]
+    errors = {}
+    for integrator in ("euler", "analytic"):
+        for ratio in (0.2, 0.4):
+            dt = ratio * scene.stable_dt
+            sim = Simulation(
+                dem_scenes.with_step(scene, dt, end), dt=dt, integrator=integrator, **run_opts
+            )
+            sim.run(until=end)
+            v = sim.velocities(0)
+            errors[integrator, ratio] = abs((v[1, 0] - v[0, 0]) / want - 1.0)
+    print({k: f"{e:.2e}" for k, e in errors.items()})
+    order = math.log2(errors["analytic", 0.4] / errors["analytic", 0.2])
+    assert order >= 1.9
+    assert math.log2(errors["euler", 0.4] / errors["euler", 0.2]) < 1.5
+    for ratio in (0.2, 0.4):
+        assert errors["analytic", ratio] < errors["euler", ratio]
 
 
 def block_on_floor(v0: float, tangential: float, pressing: float, duration: float = 0.4):
@@ -502,8 +580,10 @@ def pushed_field(duration=1.0):
     return scene_from_dict(raw)
 
 
-def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision):
-    """Work in = kinetic + elastic + friction + viscous + drag + severed, up to O(dt).
+@pytest.mark.parametrize("integrator", ["euler", "analytic"])
+def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision, integrator):
+    """Work in = kinetic + elastic + friction + viscous + drag + severed, up to O(dt), with
+    either integrator.
 
     Over the whole compaction (2.5 s): the stick springs stiffen as the contacts widen under
     load, and without the severed term the residual kept ~0.5 % of the work in at every dt
@@ -511,7 +591,7 @@ def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision):
     scene = pushed_field(2.5)
     worst = []
     for fraction in (1, 2):
-        sim = Simulation(scene, dt=scene.dt / fraction, **run_opts)
+        sim = Simulation(scene, dt=scene.dt / fraction, integrator=integrator, **run_opts)
         series = sim.run(until=2.5).series[0]
         residual = energy_residual(series)
         work = series["work_in"][-1]
@@ -569,22 +649,25 @@ def assert_same_motion(a: World, b: World) -> None:
         np.testing.assert_array_equal(getattr(a, get)(), getattr(b, get)(), err_msg=get)
 
 
-@pytest.mark.parametrize("stepping", ["worlds", "bodies"])
-def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping):
+@pytest.mark.parametrize(
+    ("stepping", "integrator"),
+    [("worlds", "euler"), ("bodies", "euler"), ("worlds", "analytic"), ("bodies", "analytic")],
+)
+def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping, integrator):
     """Forces gathered in fixed point: a world's trajectory does not depend on its batch,
     stepped a thread per world or in parallel over bodies (on the CPU the team, whose launch
     stops whenever any world's lists go stale, and whose skipped pairs are those each world
-    alone would find apart)."""
+    alone would find apart), with either integrator."""
     scenes = [scene_from_dict(cluster_scene_dict(seed, 3 + seed)) for seed in range(2)]
     dt = min(s.dt for s in scenes)
-    batch = World(scenes, dt=dt, stepping=stepping)
+    batch = World(scenes, dt=dt, stepping=stepping, integrator=integrator)
     start = batch.positions()
     batch.advance(400)  # one launch per list lifetime: stopped by either world's rebuild
     # The lists were rebuilt on the way (they record where): some launch stopped early.
     ref = batch.neighbours.nbr_ref_pos.to_numpy()[: batch.layout.n_bodies]
     assert np.max(np.hypot(*(ref - start).T)) > 0.5 * float(batch.host.list_skin)
     for w, scene in enumerate(scenes):
-        alone = World([scene], dt=dt, stepping=stepping)
+        alone = World([scene], dt=dt, stepping=stepping, integrator=integrator)
         alone.advance(400)
         sl = batch.world_slices()[w]
         assert alone.contact_counts()[0] == batch.contact_counts()[w]
@@ -645,18 +728,22 @@ def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
     assert durations[1] == pytest.approx(durations[0] / 2, rel=0.05)
 
 
-@pytest.mark.parametrize("law", ["coulomb", "rate-state"])
-def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law):
+@pytest.mark.parametrize(
+    ("law", "integrator"),
+    [("coulomb", "euler"), ("rate-state", "euler"), ("rate-state", "analytic")],
+)
+def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law, integrator):
     """One thread per world with neighbour lists (many steps per launch) and the parallel
     step with the spatial hash give the same state, bit for bit, over steps in which the
-    lists were rebuilt (blocks crossing the skin) and contacts came and went."""
+    lists were rebuilt (blocks crossing the skin) and contacts came and went; with either
+    integrator (the analytic one gathers its position impulses in fixed point too)."""
     scenes = [scene_from_dict(cluster_scene_dict(seed, 3 + seed, law=law)) for seed in range(3)]
     dt = min(s.dt for s in scenes)
-    by_bodies = World(scenes, dt=dt, stepping="bodies")
-    by_worlds = World(scenes, dt=dt, stepping="worlds")
+    by_bodies = World(scenes, dt=dt, stepping="bodies", integrator=integrator)
+    by_worlds = World(scenes, dt=dt, stepping="worlds", integrator=integrator)
     # The parallel step as a GPU runs it: its two kernels launched every step (on the CPU
     # a team of threads takes many steps per launch, ``stepper.BodyTeam``).
-    by_kernels = World(scenes, dt=dt, stepping="bodies")
+    by_kernels = World(scenes, dt=dt, stepping="bodies", integrator=integrator)
     if backend.actual_arch() == "cpu":  # the team is the CPU's; a GPU launches kernels
         assert by_bodies.team is not None
     by_kernels.team = None

@@ -134,6 +134,9 @@ def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp
     other["simulation"]["seed"] = 1
     with pytest.raises(RunFileError, match="another run"):
         Simulation(scene_from_dict(other)).run(until=UNTIL, out=path, resume=True)
+    # Another integrator steps another state (the analytic step's position impulses).
+    with pytest.raises(RunFileError, match="its integrator differs"):
+        Simulation(scene, integrator="analytic").run(until=UNTIL, out=path, resume=True)
     # A checkpoint of another state layout (format 1 had two contact buffers) is refused.
     with h5py.File(ckpt.path_for(path), "r+") as f:
         f.attrs["format_version"] = "1"

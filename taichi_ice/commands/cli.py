@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from .._version import __version__
+from ..engine.options import INTEGRATORS
 from ..errors import Interrupted, TaichiIceError
 from ..scene.table import printable
 from .args import (
@@ -109,6 +110,7 @@ def _run_scene(args, scene, out: str) -> int:
         dt=args.dt,
         force_dt=args.force_dt,
         slots=args.slots,
+        integrator=args.integrator,
     )
     law = sim.scenes[0].friction
     ran = sim.arch_used if sim.arch_used == args.arch else f"{sim.arch_used} (--arch {args.arch})"
@@ -302,6 +304,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--slots", type=slots_per_body, default=None, help="contact slots per body (1-64)"
+    )
+    p.add_argument(
+        "--integrator",
+        default="euler",
+        choices=list(INTEGRATORS),
+        help="euler: contact forces of the step's start (first order, the default); "
+        "analytic: each contact's spring-dashpot solved over the step (second order; "
+        "docs/accuracy.md)",
     )
     p.add_argument(
         "--checkpoint-every",

@@ -139,6 +139,7 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
         crushing=first.ice.crushing_strength is not None,
         precision=options.precision or "f64",
         energy=options.energy,
+        integrator=options.integrator,
     )
     if not layout.crushing:
         arrays.pop("world_crushing_force")

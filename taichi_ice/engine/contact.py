@@ -61,18 +61,21 @@ from ..physics.contact_law_ti import (
     contact_work_ti,
     cross2,
     crush_ti,
+    inverse_mass_along_ti,
     normal_force_ti,
     perp,
     tangential_damping_ti,
     tangential_force_ti,
 )
+from ..physics.contact_step_ti import pair_impulses_ti, sliding_impedance_ti, stick_or_slide_ti
 from ..physics.polygon_ti import facing_gap_ti, overlap_normals_ti
 from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE
 from ..physics.slip_ti import contact_friction_ti
 from .contact_lists import ContactLists
-from .schema import FORCE_QUANTUM, Layout, contact_columns, law_columns
+from .gather import gather
+from .schema import Layout, contact_columns, law_columns
 from .stages import Access
-from .state import Data, Model, quantum_dtype
+from .state import Data, Model
 
 
 @ti.data_oriented
@@ -111,8 +114,11 @@ class ContactStage(ContactLists):
                 "contact_theta",
                 "contact_slip",
                 "contact_crushed",
+                "contact_force",
                 "body_force_q",
                 "body_torque_q",
+                "body_shift_q",
+                "body_turn_q",
                 "body_energy",
                 "body_dvel",
                 "body_domega",
@@ -126,8 +132,11 @@ class ContactStage(ContactLists):
                 "contact_theta",
                 "contact_slip",
                 "contact_crushed",
+                "contact_force",
                 "body_force_q",
                 "body_torque_q",
+                "body_shift_q",
+                "body_turn_q",
                 "body_energy",
                 "status",
                 "nbr_gap",
@@ -143,8 +152,11 @@ class ContactStage(ContactLists):
                 "contact_theta",
                 "contact_slip",
                 "contact_crushed",
+                "contact_force",
                 "body_force_q",
                 "body_torque_q",
+                "body_shift_q",
+                "body_turn_q",
                 "body_energy",
                 "body_dvel",
                 "body_domega",
@@ -195,22 +207,14 @@ class ContactStage(ContactLists):
 
     @ti.func
     def add_force(self, i, force, torque, serial: ti.template()):
-        """Add a contact's force and torque to body i, in fixed point: atomically when
-        bodies are stepped in parallel, plainly when a thread steps the whole world
-        (``serial``); integer sums are the same in any order either way."""
-        d, q, qt = ti.static((self.data, 1.0 / FORCE_QUANTUM, quantum_dtype()))
-        # Truncated to whole quanta as 64-bit integers, then held as the sums' type (the
-        # same integers in float64, ``backend.float_gather``).
-        fx = ti.cast(ti.cast(force[0] * q, ti.i64), qt)
-        fy = ti.cast(ti.cast(force[1] * q, ti.i64), qt)
-        tq = ti.cast(ti.cast(torque * q, ti.i64), qt)
-        if ti.static(serial):
-            d.body_force_q[i] = d.body_force_q[i] + ti.Vector([fx, fy], qt)
-            d.body_torque_q[i] = d.body_torque_q[i] + tq
-        else:
-            ti.atomic_add(d.body_force_q[i][0], fx)
-            ti.atomic_add(d.body_force_q[i][1], fy)
-            ti.atomic_add(d.body_torque_q[i], tq)
+        """Add a contact's force and torque to body i (``state.gather``)."""
+        gather(self.data.body_force_q, self.data.body_torque_q, i, force, torque, serial)
+
+    @ti.func
+    def add_shift(self, i, shift, torque, serial: ti.template()):
+        """Add a contact's position impulse (as a force, 2 Q / dt^2) and its torque to body
+        i (``state.gather``; the analytic step)."""
+        gather(self.data.body_shift_q, self.data.body_turn_q, i, shift, torque, serial)
 
     @ti.func
     def pair(
@@ -225,6 +229,8 @@ class ContactStage(ContactLists):
         theta,
         last_slip,
         crushed,
+        fresh,
+        last_force,
         used,
         dt,
         serial: ti.template(),
@@ -232,7 +238,8 @@ class ContactStage(ContactLists):
         """Contact between owner i, whose outline relative to its centroid is ``p`` (its
         edges' outward normals ``p_normals``), and
         partner j, with the pair's memory of the last step (``xi``, ``elastic``, ``theta``,
-        ``last_slip``, ``crushed``: zero and ``NEW_CONTACT`` if it was not in contact).
+        ``last_slip``, ``crushed``, and for the analytic step its mean forces ``last_force``:
+        zero and ``NEW_CONTACT`` if it was not in contact, which ``fresh`` says).
         Returns
         the owner's new slot count, and the gap (m) by which a facing edge proved the pair
         apart (negative if none did)."""
@@ -291,18 +298,75 @@ class ContactStage(ContactLists):
                 m.body_inv_mass[j],
                 m.body_inv_inertia[j] * cross2(r_j, tangent) ** 2,
             )
+            # The last step's change of the pair's relative velocity at the contact point:
+            # the energy's booking velocity, and the analytic step's other forces.
+            rel_change = ti.Vector([0.0, 0.0], self.layout.real)
+            if ti.static(self.layout.velocity_changes):
+                rel_change = (d.body_dvel[j] + perp(d.body_domega[j], r_j)) - (
+                    d.body_dvel[i] + perp(d.body_domega[i], r_i)
+                )
+            # The analytic step: the normal and the stuck tangential spring-dashpot each
+            # solved over the step (``contact_step_ti``), the mean forces f and the position
+            # impulses g (2 Q / dt^2) gathered; Euler's f (and g = f) where it cannot be (a
+            # pair of bodies that do not move, a contact of no width).
+            exact = False
+            inv_n = 0.0 * k_e
+            inv_t = 0.0 * k_e
+            a_n = 0.0 * k_e
+            a_t = 0.0 * k_e
+            q_n = 0.0 * k_e
+            p_t = 0.0 * k_e
+            q_t = 0.0 * k_e
+            xi1 = xi
+            if ti.static(self.layout.analytic):
+                mi, ii = m.body_inv_mass[i], m.body_inv_inertia[i]
+                mj, ij = m.body_inv_mass[j], m.body_inv_inertia[j]
+                inv_n = inverse_mass_along_ti(
+                    mi, ii, cross2(r_i, normal), mj, ij, cross2(r_j, normal)
+                )
+                inv_t = inverse_mass_along_ti(
+                    mi, ii, cross2(r_i, tangent), mj, ij, cross2(r_j, tangent)
+                )
+                exact = width > 0.0 and inv_n > 0.0 and inv_t > 0.0
+                if exact:
+                    f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = pair_impulses_ti(
+                        ti.max(area - crushed_new, 0.0) / width,
+                        approach,
+                        slip,
+                        xi,
+                        fresh,
+                        -rel_change.dot(normal),
+                        rel_change.dot(tangent),
+                        last_force,
+                        dt,
+                        k_e * width,
+                        k_v * width,
+                        k_t,
+                        c_t,
+                        inv_n,
+                        inv_t,
+                    )
+                    if ti.static(self.layout.crushing):
+                        if f_n > cap_n:  # the strength caps the step's mean force
+                            scale = cap_n / f_n
+                            f_n, f_el, q_n = cap_n, f_el * scale, q_n * scale
             mu = 0.0
             theta_new = 0.0
             slip_rate = 0.0
             if ti.static(self.layout.rate_state):
                 f_trial = ti.abs(k_t * (xi + slip * dt) + c_t * slip)
+                impedance = k_t * dt + c_t
+                if ti.static(self.layout.analytic):
+                    if exact:  # the stuck spring-dashpot's mean force over the step
+                        f_trial = ti.abs(p_t) / dt
+                        impedance = sliding_impedance_ti(k_t, c_t, dt)
                 mu, theta_new, slip_rate = contact_friction_ti(
                     theta,
                     last_slip,
                     slip,
                     f_trial,
                     f_n,
-                    k_t * dt + c_t,
+                    impedance,
                     dt,
                     m.world_A[w],
                     m.world_B[w],
@@ -317,12 +381,33 @@ class ContactStage(ContactLists):
             else:
                 mu = m.world_mu[w]
 
-            f_t, xi_new, slip_work, damp_work = tangential_force_ti(
-                xi, slip, dt, k_t, c_t, mu * f_n
-            )
+            f_t = 0.0 * k_e
+            g_t = 0.0 * k_e
+            xi_new = xi
+            slip_work = 0.0 * k_e
+            damp_work = 0.0 * k_e
+            if ti.static(self.layout.analytic):
+                if exact:
+                    f_t, g_t, xi_new, slip_work, damp_work = stick_or_slide_ti(
+                        p_t, q_t, xi, xi1, slip, dt, k_t, c_t, mu * f_n * dt, mu * q_n
+                    )
+                else:
+                    f_t, xi_new, slip_work, damp_work = tangential_force_ti(
+                        xi, slip, dt, k_t, c_t, mu * f_n
+                    )
+            else:
+                f_t, xi_new, slip_work, damp_work = tangential_force_ti(
+                    xi, slip, dt, k_t, c_t, mu * f_n
+                )
             force = f_n * normal + f_t * tangent  # on j; -force on i
             self.add_force(j, force, cross2(r_j, force), serial)
             self.add_force(i, -force, -cross2(r_i, force), serial)
+            if ti.static(self.layout.analytic):
+                g = force  # Euler's: the mean force held over the step
+                if exact:
+                    g = (2.0 * q_n / (dt * dt)) * normal + g_t * tangent
+                self.add_shift(j, g, cross2(r_j, g), serial)
+                self.add_shift(i, -g, -cross2(r_i, g), serial)
 
             # The work of the contact's forces, booked at the velocity the bodies move with
             # over the step (``contact_work_ti``): the elastic part is what the contact holds
@@ -330,16 +415,21 @@ class ContactStage(ContactLists):
             # energy at this step's stiffness, which follows the width), the rest is
             # dissipated. (Without a budget, ``Layout.energy`` off, none of it is computed.)
             if ti.static(self.layout.energy):
-                rel_change = (d.body_dvel[j] + perp(d.body_domega[j], r_j)) - (
-                    d.body_dvel[i] + perp(d.body_domega[i], r_i)
-                )
+                # The booking velocity's change: the last step's (Euler); the analytic step
+                # knows this step's, its other forces' and its own (``contact_step``).
+                approach_change = -rel_change.dot(normal)
+                slip_change = rel_change.dot(tangent)
+                if ti.static(self.layout.analytic):
+                    if exact:
+                        approach_change = (a_n - inv_n * f_n) * dt
+                        slip_change = (a_t + inv_t * f_t) * dt
                 held, viscous, friction = contact_work_ti(
                     f_n,
                     f_el,
                     f_t,
                     approach,
-                    -rel_change.dot(normal),
-                    rel_change.dot(tangent),
+                    approach_change,
+                    slip_change,
                     dt,
                     slip_work,
                     damp_work,
@@ -368,6 +458,8 @@ class ContactStage(ContactLists):
                     d.contact_slip[i, used] = slip_rate
                 if ti.static(self.layout.crushing):
                     d.contact_crushed[i, used] = crushed_new
+                if ti.static(self.layout.analytic):
+                    d.contact_force[i, used] = ti.Vector([f_n, f_t])
             used += 1
         return used, gap
 
@@ -386,6 +478,7 @@ class ContactStage(ContactLists):
             theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
             slip=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
             crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
+            force=ti.Matrix.zero(self.layout.real, k if self.layout.analytic else 1, 2),
         )
         n_old = d.contact_count[i]
         for s in range(n_old):
@@ -398,6 +491,10 @@ class ContactStage(ContactLists):
                 old.slip[s] = d.contact_slip[i, s]
             if ti.static(self.layout.crushing):
                 old.crushed[s] = d.contact_crushed[i, s]
+            if ti.static(self.layout.analytic):
+                f = d.contact_force[i, s]
+                old.force[s, 0] = f[0]
+                old.force[s, 1] = f[1]
         return old, n_old
 
     @ti.func
@@ -439,8 +536,13 @@ class ContactStage(ContactLists):
             theta = ti.cast(NEW_CONTACT, self.layout.real)
             last_slip = ti.cast(0.0, self.layout.real)
             crushed = ti.cast(0.0, self.layout.real)
+            fresh = True
+            last_force = ti.Vector([0.0, 0.0], self.layout.real)
             for s in range(n_old):
                 if old.partner[s] == j:
+                    fresh = False
+                    if ti.static(self.layout.analytic):
+                        last_force = ti.Vector([old.force[s, 0], old.force[s, 1]])
                     xi = old.xi[s]
                     if ti.static(self.layout.energy):
                         elastic = old.elastic[s]
@@ -460,6 +562,8 @@ class ContactStage(ContactLists):
                 theta,
                 last_slip,
                 crushed,
+                fresh,
+                last_force,
                 used,
                 dt,
                 serial,

@@ -1,8 +1,15 @@
-"""Time integration: semi-implicit (symplectic) Euler for dynamic bodies.
+"""Time integration of dynamic bodies: semi-implicit (symplectic) Euler (``integrator =
+"euler"``, the default),
 
-    v(t+dt) = v(t) + dt F(x(t), v(t)) / m,     x(t+dt) = x(t) + dt v(t+dt)
+    v(t+dt) = v(t) + dt F(x(t), v(t)) / m,     x(t+dt) = x(t) + dt v(t+dt),
 
-and likewise for the angle. Fixed bodies never move; kinematic bodies move at their own
+or the analytic step (``"analytic"``), whose contacts hand over their mean force over the
+step F and their position impulse as a force G = 2 Q / dt^2 (``physics.contact_step``),
+
+    v(t+dt) = v(t) + dt (F + F_other) / m,     x(t+dt) = x(t) + dt v(t) + dt^2 (G + F_other) / 2m,
+
+F_other the external force and the water drag (taken at the step's middle); likewise for the
+angle. Fixed bodies never move; kinematic bodies move at their own
 velocity and do work on whatever they push. Work and dissipation of the step are evaluated
 with the mid-step velocity, which is the exact power of a force held constant over the step,
 so kinetic energy and work agree to round-off and the energy residual measures only the
@@ -46,6 +53,8 @@ class Integrator(Stage):
                 "time_step",
                 "body_force_q",
                 "body_torque_q",
+                "body_shift_q",
+                "body_turn_q",
                 "probe_impulse",
                 "body_vel",
                 "body_omega",
@@ -66,6 +75,8 @@ class Integrator(Stage):
             writes=(
                 "body_force_q",
                 "body_torque_q",
+                "body_shift_q",
+                "body_turn_q",
                 "probe_impulse",
                 "body_vel",
                 "body_omega",
@@ -158,6 +169,16 @@ class Integrator(Stage):
         tau = ti.cast(d.body_torque_q[i], self.layout.real) * FORCE_QUANTUM
         d.body_force_q[i] = ti.Vector([0, 0], qt)
         d.body_torque_q[i] = 0
+        # The analytic step's position impulses, as forces (2 Q / dt^2): a contact's force
+        # over the step moves the body by dt^2 / 2 of them over its mass, not by dt^2 of its
+        # mean as the Euler step has it (``contact_step``).
+        g = ti.Vector([0.0, 0.0], self.layout.real)
+        gam = ti.cast(0.0, self.layout.real)
+        if ti.static(self.layout.analytic):
+            g = ti.cast(d.body_shift_q[i], self.layout.real) * FORCE_QUANTUM
+            gam = ti.cast(d.body_turn_q[i], self.layout.real) * FORCE_QUANTUM
+            d.body_shift_q[i] = ti.Vector([0, 0], qt)
+            d.body_turn_q[i] = 0
         p = m.body_probe[i]
         if p >= 0:
             d.probe_impulse[p] = d.probe_impulse[p] + ti.cast(f * dt, ti.f64)
@@ -170,11 +191,23 @@ class Integrator(Stage):
             f_drag = ti.Vector([0.0, 0.0], self.layout.real)
             t_drag = ti.cast(0.0, self.layout.real)
             if ti.static(self.layout.water):
+                # Euler: at the step's start; analytic: at the middle of the step the other
+                # forces make (second order).
+                vd, wd = v0, w0
+                if ti.static(self.layout.analytic):
+                    vd = v0 + 0.5 * dt * m.body_inv_mass[i] * (f + f_ext)
+                    wd = w0 + 0.5 * dt * m.body_inv_inertia[i] * tau
                 f_drag, t_drag = water_drag_ti(
-                    v0, w0, m.body_drag_linear[i], m.body_drag_rotational[i]
+                    vd, wd, m.body_drag_linear[i], m.body_drag_rotational[i]
                 )
             v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
             w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
+            shift = dt * v1
+            turn = dt * w1
+            if ti.static(self.layout.analytic):
+                # x(t + dt) = x + dt v + dt^2 / (2 m) (2 Q / dt^2 + the other forces)
+                shift = dt * v0 + 0.5 * dt * dt * m.body_inv_mass[i] * (g + f_ext + f_drag)
+                turn = dt * w0 + 0.5 * dt * dt * m.body_inv_inertia[i] * (gam + t_drag)
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
             if ti.static(self.layout.energy):
                 e_d = d.body_energy[i, BodyEnergy.DRAG]
@@ -184,19 +217,22 @@ class Integrator(Stage):
                 if ti.static(self.layout.force_ext):
                     e_w = d.body_energy[i, BodyEnergy.WORK]
                     d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
-            if ti.static(self.layout.energy):  # what the contacts book with next step
+            if ti.static(self.layout.velocity_changes):  # what the contacts use next step
                 d.body_dvel[i] = v1 - v0
                 d.body_domega[i] = w1 - w0
             d.body_vel[i] = v1
             d.body_omega[i] = w1
-            self.displace(i, ti.cast(dt * v1, ti.f64), dt * w1)
+            self.displace(i, ti.cast(shift, ti.f64), turn)
             self.turn(i)
             self.moving(i)
             speed2 = v1.norm_sqr()
             w = m.body_world[i]
+            moved = speed2 * dt * dt
+            if ti.static(self.layout.analytic):
+                moved = shift.norm_sqr()
             if not (speed2 < ti.math.inf and ti.abs(w1) < ti.math.inf):
                 d.status[w, Status.NONFINITE] = 1
-            elif speed2 * dt * dt > m.world_runaway_step[w] * m.world_runaway_step[w]:
+            elif moved > m.world_runaway_step[w] * m.world_runaway_step[w]:
                 d.status[w, Status.RUNAWAY] = 1
         elif kind == BodyKind.KINEMATIC:
             # The contact force f acts on the pusher; the pusher does -f.v on the rest.

@@ -26,6 +26,10 @@ from ..backend import ARCHES, PRECISIONS
 from ..errors import StabilityError, UsageError
 
 STEPPINGS = ("auto", "worlds", "bodies")
+# How a step moves the bodies (``Options.integrator``): "euler", semi-implicit Euler with the
+# contact forces of the step's start (first order); "analytic", each contact's spring-dashpot
+# integrated exactly over the step (``physics.contact_step``; second order).
+INTEGRATORS = ("euler", "analytic")
 # Contact slots per body: DEFAULT_SMALL_SLOTS, plus one for each large body of its world (a
 # wall, a pusher) up to LARGE_SLOTS. A body owns its contacts with small bodies of higher id
 # and with large bodies. Measured with 6 slots, checked at every step (the overflow status):
@@ -60,6 +64,8 @@ class Options:
             (parallel over bodies: large worlds) or "auto" (``world.auto_stepping``).
         energy: keep the energy budget; off, trajectories are the same bit for bit and the
             step neither computes nor stores its terms (``schema.Layout.energy``).
+        integrator: "euler" or "analytic" (``INTEGRATORS``): compiled in
+            (``schema.Layout.integrator``).
     """
 
     arch: str | None = None
@@ -69,6 +75,7 @@ class Options:
     slots: int | None = None
     stepping: str = "auto"
     energy: bool = True
+    integrator: str = "euler"
 
     def __post_init__(self):
         if self.arch is not None and self.arch not in ARCHES:
@@ -95,6 +102,8 @@ class Options:
             object.__setattr__(self, "slots", int(self.slots))
         if self.stepping not in STEPPINGS:
             raise UsageError(f"stepping must be one of {STEPPINGS}, got {self.stepping!r}")
+        if self.integrator not in INTEGRATORS:
+            raise UsageError(f"integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         for name in ("force_dt", "energy"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise UsageError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -147,4 +156,4 @@ def options_of(options: Options | None, changes: dict) -> Options:
     return base.replace(**changes) if changes else base
 
 
-__all__ = ["MAX_SLOTS", "STEPPINGS", "Options", "options_of"]
+__all__ = ["INTEGRATORS", "MAX_SLOTS", "STEPPINGS", "Options", "options_of"]

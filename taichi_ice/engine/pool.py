@@ -62,6 +62,7 @@ class WorldPool:
                 if asked.stepping == options.stepping
                 and w.precision == options.precision
                 and w.layout.energy == options.energy
+                and w.layout.integrator == options.integrator
                 and w.layout.n_worlds == len(scenes)
                 and w.layout.n_bodies == n_bodies
                 and options.slots in (None, w.layout.slots)

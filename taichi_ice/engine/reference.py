@@ -76,6 +76,7 @@ class ReferenceModel:
         crushing_force: ``(W,)`` strength x thickness (N/m), or None.
         tol: Newton's tolerance of the sliding rate.
         quantum: force resolution of the gather (N); None sums in floating point.
+        integrator: "euler" or "analytic" (``options.INTEGRATORS``).
     """
 
     kind: np.ndarray
@@ -94,6 +95,7 @@ class ReferenceModel:
     quantum: float | None = FORCE_QUANTUM
     crushing_force: np.ndarray | None = None
     tol: float = NEWTON_TOLERANCE["f64"]
+    integrator: str = "euler"
 
     @property
     def n_bodies(self) -> int:
@@ -138,6 +140,7 @@ class ReferenceModel:
             quantum=quantum,
             crushing_force=host.world_crushing_force if layout.crushing else None,
             tol=NEWTON_TOLERANCE[layout.precision],
+            integrator=layout.integrator,
         )
 
     @classmethod
@@ -237,19 +240,28 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
     n = model.n_bodies
     new = state.copy()
     exact = model.quantum is None
+    analytic = model.integrator == "analytic"
     force_sum = np.zeros((n, 2)) if exact else [[0, 0] for _ in range(n)]
     torque_sum = np.zeros(n) if exact else [0] * n
+    shift_sum = np.zeros((n, 2)) if exact else [[0, 0] for _ in range(n)]
+    turn_sum = np.zeros(n) if exact else [0] * n
     scale = None if exact else 1.0 / model.quantum
 
-    def gather(k: int, f: np.ndarray, tau: float) -> None:
+    def gather(k: int, f: np.ndarray, tau: float, forces=force_sum, torques=torque_sum) -> None:
         if exact:
-            force_sum[k] += f
-            torque_sum[k] += tau
+            forces[k] += f
+            torques[k] += tau
         else:
             # float -> int truncates toward zero, like ti.cast(x, ti.i64).
-            force_sum[k][0] += int(f[0] * scale)
-            force_sum[k][1] += int(f[1] * scale)
-            torque_sum[k] += int(tau * scale)
+            forces[k][0] += int(f[0] * scale)
+            forces[k][1] += int(f[1] * scale)
+            torques[k] += int(tau * scale)
+
+    def summed(forces, torques, i: int) -> tuple[np.ndarray, float]:
+        if exact:
+            return forces[i], float(torques[i])
+        f = np.array([float(forces[i][0]), float(forces[i][1])]) * model.quantum
+        return f, float(torques[i]) * model.quantum
 
     contacts: dict[tuple[int, int], ContactMemory] = {}
     for i in range(n):
@@ -284,11 +296,15 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 if model.crushing_force is None
                 else float(model.crushing_force[w]),
                 tol=model.tol,
+                analytic=analytic,
             )
             if c is None:
                 continue  # no overlap: the pair's memory is dropped
             gather(j, c.force, c.torque_partner)
             gather(i, -c.force, c.torque_owner)
+            if analytic:
+                gather(j, c.shift, c.shift_torque_partner, shift_sum, turn_sum)
+                gather(i, -c.shift, c.shift_torque_owner, shift_sum, turn_sum)
             new.body_energy[i, BodyEnergy.FRICTION] += c.slip_work
             new.body_energy[i, BodyEnergy.VISCOUS] += c.viscous_work
             new.body_energy[i, BodyEnergy.CRUSHING] += c.crushing_work
@@ -300,22 +316,27 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
     new.contacts = contacts
 
     for i in range(n):
-        if exact:
-            f, tau = force_sum[i], float(torque_sum[i])
-        else:
-            f = np.array([float(force_sum[i][0]), float(force_sum[i][1])]) * model.quantum
-            tau = float(torque_sum[i]) * model.quantum
+        f, tau = summed(force_sum, torque_sum, i)
         if model.kind[i] == BodyKind.DYNAMIC:
             v0, w0 = state.vel[i], float(state.omega[i])
+            f_ext = model.force_ext[i]
             f_drag, t_drag = np.zeros(2), 0.0
             if model.drag is not None:
+                vd, wd = v0, w0  # analytic: mid-step, as the others leave it
+                if analytic:
+                    vd = v0 + 0.5 * dt * (1.0 / model.mass[i]) * (f + f_ext)
+                    wd = w0 + 0.5 * dt * (1.0 / model.inertia[i]) * tau
                 fd, td = water_drag(
-                    v0[None, :], np.array([w0]), model.drag[i, 0:1], model.drag[i, 1:2]
+                    vd[None, :], np.array([wd]), model.drag[i, 0:1], model.drag[i, 1:2]
                 )
                 f_drag, t_drag = fd[0], float(td[0])
-            f_ext = model.force_ext[i]
             v1 = v0 + dt * (1.0 / model.mass[i]) * (f + f_ext + f_drag)
             w1 = w0 + dt * (1.0 / model.inertia[i]) * (tau + t_drag)
+            shift, turn = dt * v1, dt * w1
+            if analytic:
+                g, gam = summed(shift_sum, turn_sum, i)
+                shift = dt * v0 + 0.5 * dt * dt * (1.0 / model.mass[i]) * (g + f_ext + f_drag)
+                turn = dt * w0 + 0.5 * dt * dt * (1.0 / model.inertia[i]) * (gam + t_drag)
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
             new.body_energy[i, BodyEnergy.DRAG] += -(float(f_drag @ vm) + t_drag * wm) * dt
             new.body_energy[i, BodyEnergy.WORK] += float(f_ext @ vm) * dt
@@ -323,8 +344,8 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             new.domega[i] = w1 - w0
             new.vel[i] = v1
             new.omega[i] = w1
-            new.pos[i] = state.pos[i] + dt * v1
-            new.angle[i] = state.angle[i] + dt * w1
+            new.pos[i] = state.pos[i] + shift
+            new.angle[i] = state.angle[i] + turn
         elif model.kind[i] == BodyKind.KINEMATIC:
             v, w = state.vel[i], float(state.omega[i])
             new.body_energy[i, BodyEnergy.WORK] += -(float(f @ v) + tau * w) * dt

@@ -25,10 +25,12 @@ import numpy as np
 from ..physics.contact_law import (
     contact_work,
     crush,
+    inverse_mass_along,
     normal_force,
     tangential_damping,
     tangential_force,
 )
+from ..physics.contact_step import pair_impulses, sliding_impedance, stick_or_slide
 from ..physics.friction import method_code
 from ..physics.polygon import overlap
 from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE, NO_INTERFACE, contact_friction
@@ -49,6 +51,8 @@ class ContactMemory:
             sliding interface (and for Coulomb), ``slip.NEW_CONTACT`` before its first step.
         slip: the law's slip rate along the tangent (m/s, signed; 0 for Coulomb).
         crushed: overlap area crushed so far (m^2).
+        force: the analytic step's mean normal and tangential force on the partner over the
+            last step (N).
     """
 
     xi: float = 0.0
@@ -57,6 +61,7 @@ class ContactMemory:
     theta: float = NEW_CONTACT
     slip: float = 0.0
     crushed: float = 0.0
+    force: tuple[float, float] = (0.0, 0.0)
 
 
 class ContactForce(NamedTuple):
@@ -77,6 +82,9 @@ class ContactForce(NamedTuple):
         slip_work: frictional work of the step (J). viscous_work: dashpot work (J).
         crushing_work: work on the crushed overlap (J). sliding_rate: V of the law (m/s,
             signed along the tangent; 0 for Coulomb).
+        shift, shift_torque_owner, shift_torque_partner: the analytic step's position
+            impulse on the partner as a force, ``2 Q / dt^2`` (N), and its torques (None and
+            0 for the Euler step).
     """
 
     area: float
@@ -98,6 +106,9 @@ class ContactForce(NamedTuple):
     viscous_work: float
     crushing_work: float = 0.0
     sliding_rate: float = 0.0
+    shift: np.ndarray | None = None
+    shift_torque_owner: float = 0.0
+    shift_torque_partner: float = 0.0
 
 
 def _cross(a, b) -> float:
@@ -133,6 +144,7 @@ def contact_force(
     method: int | None = None,
     crushing_force: float | None = None,
     tol: float = NEWTON_TOLERANCE["f64"],
+    analytic: bool = False,
 ) -> ContactForce | None:
     """NumPy reference of ``ContactStage.pair``: the contact between an owner and a partner.
 
@@ -161,6 +173,9 @@ def contact_force(
         method: ``codes.ThetaMethod`` for theta; default the law's own method.
         crushing_force: strength x thickness (N/m), or None for no strength.
         tol: Newton's tolerance of the sliding rate (``slip.NEWTON_TOLERANCE``).
+        analytic: the analytic step (``physics.contact_step``): the normal and the stuck
+            tangential spring-dashpot solved over the step, the pair's other forces told
+            from ``dvel``, ``domega`` and the memory's ``force``.
 
     Returns:
         A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
@@ -198,6 +213,43 @@ def contact_force(
         inv_mass[1],
         inv_inertia[1] * _cross(r_j, tangent) ** 2,
     )
+    change = (np.asarray(dvel[1], dtype=np.float64) + _spin(domega[1], r_j)) - (
+        np.asarray(dvel[0], dtype=np.float64) + _spin(domega[0], r_i)
+    )
+    exact = False
+    q_n = p_t = q_t = 0.0
+    xi1 = old.xi
+    if analytic:
+        ci_n, cj_n = _cross(r_i, normal), _cross(r_j, normal)
+        ci_t, cj_t = _cross(r_i, tangent), _cross(r_j, tangent)
+        inv_n = inverse_mass_along(
+            inv_mass[0], inv_inertia[0], ci_n, inv_mass[1], inv_inertia[1], cj_n
+        )
+        inv_t = inverse_mass_along(
+            inv_mass[0], inv_inertia[0], ci_t, inv_mass[1], inv_inertia[1], cj_t
+        )
+        exact = width > 0.0 and inv_n > 0.0 and inv_t > 0.0
+    if exact:
+        f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = pair_impulses(
+            max(area - crushed, 0.0) / width,
+            approach,
+            slip,
+            old.xi,
+            memory is None,
+            -float(change @ normal),
+            float(change @ tangent),
+            old.force,
+            dt,
+            k_e * width,
+            k_v * width,
+            k_t,
+            c_t,
+            inv_n,
+            inv_t,
+        )
+        if crushing_force is not None and f_n > cap_n:
+            scale = cap_n / f_n
+            f_n, f_el, q_n = cap_n, f_el * scale, q_n * scale
     theta_new, v = NO_INTERFACE, 0.0
     if isinstance(law, (int, float)):
         mu, theta_new = float(law), 0.0  # no theta is kept
@@ -205,13 +257,17 @@ def contact_force(
         row = law.contact_row()
         code = method_code(getattr(law, "method", "exponential")) if method is None else method
         f_trial = abs(k_t * (old.xi + slip * dt) + c_t * slip)
+        impedance = k_t * dt + c_t
+        if exact:
+            f_trial = abs(p_t) / dt
+            impedance = sliding_impedance(k_t, c_t, dt)
         mu, theta_new, v = contact_friction(
             old.theta,
             old.slip,
             slip,
             f_trial,
             f_n,
-            k_t * dt + c_t,
+            impedance,
             dt,
             row["A"],
             row["B"],
@@ -224,19 +280,30 @@ def contact_force(
             tol,
         )
 
-    f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
+    shift = None
+    if exact:
+        f_t, g_t, xi_new, slip_work, damp_work = stick_or_slide(
+            p_t, q_t, old.xi, xi1, slip, dt, k_t, c_t, mu * f_n * dt, mu * q_n
+        )
+    else:
+        f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
     force = f_n * normal + f_t * tangent
+    if analytic:
+        shift = force.copy()  # Euler's: the mean force held over the step
+        if exact:
+            shift = (2.0 * q_n / (dt * dt)) * normal + g_t * tangent
     # The work of its forces at the bodies' mid-step velocity (``contact_law.contact_work``).
-    change = (np.asarray(dvel[1], dtype=np.float64) + _spin(domega[1], r_j)) - (
-        np.asarray(dvel[0], dtype=np.float64) + _spin(domega[0], r_i)
-    )
+    approach_change, slip_change = -float(change @ normal), float(change @ tangent)
+    if exact:  # this step's change, its other forces' and its own
+        approach_change = (a_n - inv_n * f_n) * dt
+        slip_change = (a_t + inv_t * f_t) * dt
     held, viscous, friction = contact_work(
         f_n,
         f_el,
         f_t,
         approach,
-        -float(change @ normal),
-        float(change @ tangent),
+        approach_change,
+        slip_change,
         dt,
         slip_work,
         damp_work,
@@ -267,9 +334,13 @@ def contact_force(
             theta=theta_new,
             slip=v,
             crushed=crushed,
+            force=(f_n, f_t),
         ),
         slip_work=friction,
         viscous_work=viscous,
         crushing_work=crushing_work,
         sliding_rate=v,
+        shift=shift,
+        shift_torque_owner=0.0 if shift is None else -_cross(r_i, shift),
+        shift_torque_partner=0.0 if shift is None else _cross(r_j, shift),
     )

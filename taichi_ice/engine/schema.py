@@ -229,14 +229,17 @@ DATA: tuple[Var, ...] = (
     Var("body_force_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "contact force gathered this step, fixed point (float64 whole quanta where integer atomics fail in loops: backend.float_gather)", lanes=2),
     Var("body_torque_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "contact torque gathered this step, fixed point (as body_force_q)"),
     Var("body_energy", "f64", ("n_bodies", "body_energy_terms"), "J", "cumulative per-body terms, codes.BodyEnergy columns", role="diagnostic", when="energy"),
-    Var("body_dvel", "real", ("n_bodies",), "m/s", "velocity change of the body's last step: the contacts book their work at v + dv / 2 (contact_law.contact_work)", lanes=2, when="energy"),
-    Var("body_domega", "real", ("n_bodies",), "rad/s", "angular velocity change of the body's last step", when="energy"),
+    Var("body_dvel", "real", ("n_bodies",), "m/s", "velocity change of the body's last step: the contacts book their work at v + dv / 2 (contact_law.contact_work); the analytic step estimates a pair's other forces from it", lanes=2, when="velocity_changes"),
+    Var("body_domega", "real", ("n_bodies",), "rad/s", "angular velocity change of the body's last step", when="velocity_changes"),
+    Var("body_shift_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "analytic step: the contacts' position impulses 2 Q / dt^2 gathered this step, fixed point (as body_force_q)", lanes=2, when="analytic"),
+    Var("body_turn_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "analytic step: their torque, fixed point", when="analytic"),
     Var("contact_partner", "i32", ("n_bodies", "slots"), "id", "partner body of each slot, -1 if empty", init=-1),
     Var("contact_count", "i32", ("n_bodies",), "", "used slots of each body"),
     Var("contact_xi", "real", ("n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
     Var("contact_elastic", "real", ("n_bodies", "slots"), "J", "elastic energy the contact holds: work of its normal and tangential springs (booked as severed when the contact ends)", role="diagnostic", when="energy"),
     Var("contact_theta", "real", ("n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
     Var("contact_slip", "real", ("n_bodies", "slots"), "m/s", "slip rate of the law along the tangent (signed: a change of sign ends the interface); 0 if stuck", when="rate_state"),
+    Var("contact_force", "real", ("n_bodies", "slots"), "N", "analytic step: the contact's mean normal and tangential force on the partner over its last step (what its pair's other forces are told from)", lanes=2, when="analytic"),
     Var("contact_crushed", "real", ("n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
     Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic", when="energy"),
     Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
@@ -324,6 +327,8 @@ class Layout:
             energy, ``world_energy``); off, no kernel computes or stores a term of it, and
             the samples' energy columns are NaN.
         nbr_len: entries of a body's neighbour list.
+        integrator: how the step moves the bodies, "euler" or "analytic"
+            (``options.INTEGRATORS``).
     """
 
     n_bodies: int
@@ -344,6 +349,19 @@ class Layout:
     energy: bool = True
     force_ext: bool = True
     nbr_len: int = 1
+    integrator: str = "euler"
+
+    @property
+    def analytic(self) -> bool:
+        """Each contact's spring-dashpot is integrated exactly over the step
+        (``integrator = "analytic"``): its position impulses are gathered too."""
+        return self.integrator == "analytic"
+
+    @property
+    def velocity_changes(self) -> bool:
+        """Each body's last velocity change is kept (``body_dvel``): for the energy budget's
+        booking, and for the analytic step's estimate of what a pair's other forces do."""
+        return self.energy or self.analytic
 
     @property
     def real(self):

@@ -52,6 +52,11 @@ class Stage:
     ACCESS: Mapping[str, Access] = {}
 
 
+# Module functions that add to the fields passed as their first n arguments (read and
+# written, as an atomic): ``fields_touched`` counts those arguments as written.
+ACCUMULATES = {"gather": 2}
+
+
 def fields_touched(cls: type, kernel: str) -> tuple[set[str], set[str]]:
     """(read, written) field names that a kernel of stage class ``cls`` touches, from its
     source and the source of every method of ``cls`` it calls (transitively), including
@@ -103,6 +108,13 @@ def fields_touched(cls: type, kernel: str) -> tuple[set[str], set[str]]:
                 and node.args
             ):
                 targets = [node.args[0]]
+            elif (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Name)
+                and node.func.id in ACCUMULATES
+            ):
+                # A function that adds to fields it is handed (``gather.gather``).
+                targets = node.args[: ACCUMULATES[node.func.id]]
             for t in targets:
                 writes.update(_field_names(t, declared))
         for node in ast.walk(tree):

@@ -24,7 +24,7 @@ from .schema import HostArrays, Layout, Var
 
 # The fixed-point force sums: float64 holding whole quanta where the device's integer
 # atomics fail inside loops (``backend.float_gather``), else 64-bit integers.
-GATHERED = ("body_force_q", "body_torque_q")
+GATHERED = ("body_force_q", "body_torque_q", "body_shift_q", "body_turn_q")
 
 
 def quantum_dtype():

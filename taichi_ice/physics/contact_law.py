@@ -12,7 +12,14 @@ contact stage does with them is told in ``contact``.
 
 import math
 
-__all__ = ["contact_work", "crush", "normal_force", "tangential_damping", "tangential_force"]
+__all__ = [
+    "contact_work",
+    "crush",
+    "inverse_mass_along",
+    "normal_force",
+    "tangential_damping",
+    "tangential_force",
+]
 
 
 def normal_force(area, width, approach_speed, k_e, k_v):
@@ -49,6 +56,18 @@ def crush(area, crushed, width, k_e, force_per_width):
     if k_e * (area - crushed) > cap:
         crushed = area - cap / k_e
     return cap, crushed
+
+
+def inverse_mass_along(inv_mass_i, inv_inertia_i, cross_i, inv_mass_j, inv_inertia_j, cross_j):
+    """1/kg: the inverse of the mass two bodies move with at their contact point along a
+    direction ``d``, ``1/m_i + (r_i x d)^2 / I_i + 1/m_j + (r_j x d)^2 / I_j`` (``cross_i``,
+    ``cross_j``: ``r x d`` of each; 0 terms for a fixed or kinematic body)."""
+    return (
+        inv_mass_i
+        + inv_inertia_i * cross_i * cross_i
+        + inv_mass_j
+        + inv_inertia_j * cross_j * cross_j
+    )
 
 
 def tangential_damping(k_t, zeta, inv_mass_i, inv_turn_i, inv_mass_j, inv_turn_j):

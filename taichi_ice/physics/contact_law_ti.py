@@ -14,6 +14,7 @@ __all__ = [
     "contact_work_ti",
     "cross2",
     "crush_ti",
+    "inverse_mass_along_ti",
     "normal_force_ti",
     "perp",
     "tangential_damping_ti",
@@ -48,6 +49,17 @@ def crush_ti(area, crushed, width, k_e, force_per_width):
     if k_e * (area - crushed) > cap:
         crushed_new = area - cap / k_e
     return cap, crushed_new
+
+
+@ti.func
+def inverse_mass_along_ti(inv_mass_i, inv_inertia_i, cross_i, inv_mass_j, inv_inertia_j, cross_j):
+    """Taichi twin of :func:`contact_law.inverse_mass_along`."""
+    return (
+        inv_mass_i
+        + inv_inertia_i * cross_i * cross_i
+        + inv_mass_j
+        + inv_inertia_j * cross_j * cross_j
+    )
 
 
 @ti.func

@@ -43,7 +43,10 @@ __all__ = [
     "QUARTER_TURN",
     "onset",
     "oscillator_step",
+    "pair_impulses",
+    "sliding_impedance",
     "spring_dashpot",
+    "stick_or_slide",
 ]
 
 # |z - 1| below which the critically damped solution is used (the under- and overdamped ones
@@ -202,3 +205,100 @@ def spring_dashpot(x, u, h, k, c, inv_m, a, clamp, tau=0.0):
     p = (u + a * h - u1) * m
     q = (x + u * h + 0.5 * a * h * h - x1) * m
     return p0 + p, q0 + h * p0 + q, v0 + c * (x_end - x), x1, u1
+
+
+def stick_or_slide(p_t, q_t, xi, xi1, slip, h, k_t, c_t, cap_p, cap_q):
+    """The tangential impulse of a step, capped by friction (Cundall and Strack 1979).
+
+    Args:
+        p_t, q_t: the stick spring-dashpot's impulse and position impulse over the step had
+            the contact stuck (``spring_dashpot``, unclamped: positive against the stretch).
+        xi, xi1: the stretch at the step's start and, stuck, at its end (m).
+        slip: the tangential velocity of the partner relative to the owner (m/s).
+        h: the step (s). k_t, c_t: stick spring (N/m) and dashpot (N s/m).
+        cap_p, cap_q: ``mu P_n`` and ``mu Q_n``: the most friction can give over the step.
+
+    Returns:
+        ``(f_t, g_t, xi_new, slip_work, damp_work)``: the step's mean force on the partner
+        along the tangent (N, ``-P / h``), its position impulse as a force (N, ``-2 Q / h^2``:
+        what the body update takes), the stretch after the step, and the frictional and
+        dashpot work (J): stuck, none is frictional; sliding, the force is the cap, the
+        spring-dashpot relaxes toward it over the step (its mean force, the stretch's
+        trapezoid, is the cap: ``k_t (xi + xi') / 2 + c_t (xi' - xi) / h = cap``, the
+        analytic step's counterpart of ``contact_law.tangential_force``'s backward Euler,
+        with the slip rate's impedance ``k_t h / 2 + c_t``, ``sliding_impedance``) and the
+        cap's work on the slip is frictional. The two with the spring's change add
+        up to the work on the start-of-step slip, ``-f_t slip h = slip_work + damp_work +
+        k_t xi_new (xi_new - xi)`` (``contact_law.contact_work`` books the rest at the
+        mid-step velocity).
+    """
+    f_t = -p_t / h
+    g_t = -2.0 * q_t / (h * h)
+    xi_new = xi1
+    slip_work = 0.0
+    if abs(p_t) > cap_p:
+        sign = math.copysign(1.0, p_t)
+        f_t = -sign * cap_p / h
+        g_t = -sign * 2.0 * cap_q / (h * h)
+        xi_new = (c_t * xi - f_t * h) / (k_t * h + c_t)
+        slip_work = (cap_p / h) * abs(xi + slip * h - xi_new)
+    damp_work = -f_t * slip * h - k_t * xi_new * (xi_new - xi) - slip_work
+    return f_t, g_t, xi_new, slip_work, damp_work
+
+
+def sliding_impedance(k_t, c_t, h):
+    """N s/m: how much the step's mean tangential force falls per m/s of sliding, ``k_t h /
+    2 + c_t`` (the stretch a steady slide takes off grows through the step, so the spring
+    loses half of ``k_t V h`` on the mean); what the rate-and-state law's sliding rate is
+    solved with in the analytic step (``slip.contact_friction``'s ``K``; the Euler step's
+    is ``k_t h + c_t``, its force taken at the step's end)."""
+    return k_t * h + c_t
+
+
+def pair_impulses(
+    depth,
+    approach,
+    slip,
+    xi,
+    fresh,
+    approach_change,
+    slip_change,
+    last_force,
+    h,
+    k_n,
+    c_n,
+    k_t,
+    c_t,
+    inv_n,
+    inv_t,
+):
+    """A pair's normal and stuck tangential spring-dashpots over the step (the analytic
+    step's contact, ``contact.ContactStage.pair`` and ``reference_contact.contact_force``).
+
+    Args:
+        depth: ``A / L``, the overlap's mean depth (m). approach, slip: the normal approach
+            speed (m/s, positive closing) and the tangential slip of the partner (m/s).
+        xi: the stick spring's stretch (m). fresh: the pair did not touch at the last step.
+        approach_change, slip_change: the last step's change of the two (m/s).
+        last_force: the contact's mean normal and tangential force on the partner over the
+            last step (N): what it did to the change, taken out to leave its other forces'.
+        h: the step (s). k_n, c_n: normal spring and dashpot; k_t, c_t: the stick spring's.
+        inv_n, inv_t: the pair's inverse mass along the normal and the tangent (1/kg).
+
+    Returns:
+        ``(f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t)``: the step's mean normal force and its
+        elastic part (N), the normal position impulse (N s^2), the stuck tangential impulse
+        and position impulse (against the stretch), the stuck stretch after the step, and
+        the other forces' accelerations of the approach and the slip (m/s^2).
+    """
+    a_n = approach_change / h
+    a_t = slip_change / h
+    tau = 0.0
+    if fresh:
+        tau = onset(depth, approach, h)
+    else:
+        a_n += inv_n * last_force[0]
+        a_t -= inv_t * last_force[1]
+    p_n, q_n, p_v, _, _ = spring_dashpot(depth, approach, h, k_n, c_n, inv_n, a_n, True, tau)
+    p_t, q_t, _, xi1, _ = spring_dashpot(xi, slip, h, k_t, c_t, inv_t, a_t, False, tau)
+    return p_n / h, (p_n - p_v) / h, q_n, p_t, q_t, xi1, a_n, a_t

@@ -14,7 +14,14 @@ from .contact_step import CRITICAL_BAND, END_ITERATIONS, MAX_LOOKS, QUARTER_TURN
 from .fmath_ti import exp_ti
 from .polygon_ti import rotation_ti
 
-__all__ = ["oscillator_step_ti", "spring_dashpot_ti"]
+__all__ = [
+    "onset_ti",
+    "oscillator_step_ti",
+    "pair_impulses_ti",
+    "sliding_impedance_ti",
+    "spring_dashpot_ti",
+    "stick_or_slide_ti",
+]
 
 EPS64 = 2.220446049250313e-16
 
@@ -170,3 +177,69 @@ def spring_dashpot_ti(x, u, h, k, c, inv_m, a, clamp: ti.template(), tau):
     p = (us + a * h - u1) * m
     q = (xs + us * h + 0.5 * a * h * h - x1) * m
     return p0 + p, q0 + h * p0 + q, v0 + c * (x_end - xs), x1, u1
+
+
+@ti.func
+def stick_or_slide_ti(p_t, q_t, xi, xi1, slip, h, k_t, c_t, cap_p, cap_q):
+    """Twin of :func:`contact_step.stick_or_slide`: ``(f_t, g_t, xi_new, slip_work, damp_work)``."""
+    f_t = -p_t / h
+    g_t = -2.0 * q_t / (h * h)
+    xi_new = xi1
+    slip_work = 0.0 * xi
+    if ti.abs(p_t) > cap_p:
+        sign = 1.0
+        if p_t < 0.0:
+            sign = -1.0
+        f_t = -sign * cap_p / h
+        g_t = -sign * 2.0 * cap_q / (h * h)
+        xi_new = (c_t * xi - f_t * h) / (k_t * h + c_t)
+        slip_work = (cap_p / h) * ti.abs(xi + slip * h - xi_new)
+    damp_work = -f_t * slip * h - k_t * xi_new * (xi_new - xi) - slip_work
+    return f_t, g_t, xi_new, slip_work, damp_work
+
+
+@ti.func
+def onset_ti(x, u, h):
+    """Twin of :func:`contact_step.onset`."""
+    tau = 0.0 * x
+    if u > 0.0 and x > 0.0:
+        tau = ti.min(x / u, h)
+    return tau
+
+
+@ti.func
+def sliding_impedance_ti(k_t, c_t, h):
+    """Twin of :func:`contact_step.sliding_impedance`."""
+    return k_t * h + c_t
+
+
+@ti.func
+def pair_impulses_ti(
+    depth,
+    approach,
+    slip,
+    xi,
+    fresh,
+    approach_change,
+    slip_change,
+    last_force,
+    h,
+    k_n,
+    c_n,
+    k_t,
+    c_t,
+    inv_n,
+    inv_t,
+):
+    """Twin of :func:`contact_step.pair_impulses`."""
+    a_n = approach_change / h
+    a_t = slip_change / h
+    tau = 0.0 * h
+    if fresh:
+        tau = onset_ti(depth, approach, h)
+    else:
+        a_n += inv_n * last_force[0]
+        a_t -= inv_t * last_force[1]
+    p_n, q_n, p_v, _x, _u = spring_dashpot_ti(depth, approach, h, k_n, c_n, inv_n, a_n, True, tau)
+    p_t, q_t, _v, xi1, _s = spring_dashpot_ti(xi, slip, h, k_t, c_t, inv_t, a_t, False, tau)
+    return p_n / h, (p_n - p_v) / h, q_n, p_t, q_t, xi1, a_n, a_t

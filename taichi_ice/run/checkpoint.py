@@ -39,12 +39,13 @@ from ..errors import OutputError, RunFileError
 from ..scene.table import printable
 from .runfile_read import DAMAGE
 
-FORMAT_VERSION = "7"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "8"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
 #                       5: a body's rotation (body_rot) instead of its turned outline;
 #                       6: the neighbour lists' gaps and paths (nbr_gap, nbr_path);
 #                       7: a digest of everything in it (damage is refused, not restored)
+#                       8: the integrator (euler or analytic), whose state differs
 SUFFIX = ".ckpt"
 
 
@@ -65,6 +66,7 @@ def identity(sim) -> dict:
         "frictions": [json.dumps(s.friction.to_dict(), sort_keys=True) for s in sim.scenes],
         "dt": float(sim.dt),
         "precision": sim.precision,
+        "integrator": sim.options.integrator,
     }
 
 
@@ -112,6 +114,7 @@ def _write(sim, tmp: Path, arrays: dict, run_ids, n_samples, n_frames) -> None:
         f.attrs["time"] = float(world.time)
         f.attrs["dt"] = ident["dt"]
         f.attrs["precision"] = ident["precision"]
+        f.attrs["integrator"] = ident["integrator"]
         f.attrs["scenarios"] = json.dumps(ident["scenarios"])
         f.attrs["frictions"] = json.dumps(ident["frictions"])
         f.attrs["n_samples"] = json.dumps([int(n) for n in n_samples])
@@ -134,7 +137,9 @@ def digest(groups: dict, attrs: dict) -> str:
     for key in sorted(attrs):
         if key not in ("written", "digest"):
             value = attrs[key]
-            h.update(f"{key}={value.decode() if isinstance(value, bytes) else value}".encode())
+            text = value.decode("utf-8", "surrogateescape") if isinstance(value, bytes) else value
+            # A damaged attribute may hold bytes that are not UTF-8: they stay in the digest.
+            h.update(f"{key}={text}".encode("utf-8", "surrogateescape"))
     return h.hexdigest()
 
 
@@ -207,6 +212,7 @@ def restore(sim, ckpt: dict, where: str | Path) -> None:
         ("scene", ident["scenarios"], a["scenarios"]),
         ("dt", ident["dt"], float(a["dt"])),
         ("precision", ident["precision"], a["precision"]),
+        ("integrator", ident["integrator"], a["integrator"]),
     ):
         if now != then:
             raise RunFileError(

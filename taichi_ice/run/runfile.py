@@ -7,7 +7,8 @@ Layout (one file per world; DESIGN.md section 3):
   ``taichi_version``, ``numpy_version``, ``h5py_version``, ``python_version``,
   ``git_revision``, ``command``, ``host``, ``started`` and ``finished`` (UTC), ``scenario``
   (the scene's TOML), ``source``, ``friction`` (law name), ``friction_params`` (JSON),
-  ``arch`` (what ran: ``cpu``, ``cuda`` ...), ``arch_requested``, ``precision``, ``dt`` (s),
+  ``arch`` (what ran: ``cpu``, ``cuda`` ...), ``arch_requested``, ``precision``,
+  ``integrator`` (``euler`` or ``analytic``), ``dt`` (s),
   ``stable_dt`` (s), ``seed``, ``status`` (``running``, ``complete`` or ``failed``),
   ``failure`` (why, if failed), ``warning`` (e.g. a budget residual past its bound),
   ``steps``, ``wall_time`` (s), ``resumed`` (how many times the run was resumed).

@@ -310,6 +310,7 @@ class Simulation:
             "arch": self.arch_used,
             "arch_requested": self.arch,
             "precision": self.precision,
+            "integrator": self.options.integrator,
             "dt": self.dt,
             "dt_requested": self.dt_requested,
             "stable_dt": self.world.stable_dt,

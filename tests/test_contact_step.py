@@ -66,6 +66,7 @@ def test_a_step_of_the_forced_oscillator_matches_the_ode():
     """``oscillator_step`` from random states, with the pair's other forces (a constant
     acceleration), against SciPy's solution of the same ODE; with the clamp the force stops
     where it would pull and the rest of the step is free flight."""
+    compared = 0
     for _ in range(60):
         k = 10.0 ** RNG.uniform(5.0, 9.0)
         inv_m = 10.0 ** RNG.uniform(-4.0, -1.0)
@@ -88,8 +89,6 @@ def test_a_step_of_the_forced_oscillator_matches_the_ode():
             continue  # pulling from the start: free flight (the ODE would engage later)
         ref = solve_ivp(rhs, (0.0, h), [x0, u0], method="DOP853", rtol=1e-12, atol=1e-18)
         x1, u1, _ = oscillator_step(x0, u0, h, k, c, inv_m, a, clamp)
-        if clamp and ref.y[0, -1] * k + c * ref.y[1, -1] < 0.0 and x1 != ref.y[0, -1]:
-            pass  # the ODE may pull again after letting go; the step flies: compare below
         scale_x = abs(x0) + abs(u0) * h + abs(a) * h * h
         scale_u = abs(u0) + abs(a) * h + w * abs(x0)
         if clamp:
@@ -99,6 +98,8 @@ def test_a_step_of_the_forced_oscillator_matches_the_ode():
                 continue
         assert x1 == pytest.approx(ref.y[0, -1], abs=1e-7 * scale_x)
         assert u1 == pytest.approx(ref.y[1, -1], abs=1e-7 * scale_u)
+        compared += 1
+    assert compared >= 30  # most draws are compared, not passed over
 
 
 def test_impulses_account_for_the_motion():

@@ -142,3 +142,82 @@ def test_timing_runs_the_span_beyond_where_the_run_stopped():
     assert timing["timed_steps"] == pytest.approx(0.02 / dt, abs=1)
     assert timing["wall_per_step_s"] > 0
     assert sim.time == pytest.approx(0.07, abs=dt)
+
+
+def test_the_analysis_keeps_each_integrator_its_own_series_order_and_default_step():
+    """Errors of 0.05 (h / 0.2) (Euler) and 0.05 (h / 0.4)^2 (analytic) over one ladder: each
+    integrator gets its
+    own fitted order (1 and 2, the exponents put in), its own interpolated error and its own
+    recommended step; the tables name both. No Taichi: the analysis of made-up points."""
+    from taichi_ice.experiments.validation import dem_analysis, dem_charts, dem_stability
+
+    ladder = (0.0125, 0.05, 0.2, 0.8)
+    points = []
+    for integ, power, h0 in (("euler", 1.0, 0.2), ("analytic", 2.0, 0.4)):
+        for law in ("coulomb", "rate-state"):
+            for h in ladder:
+                points.append(
+                    {
+                        "scene": "face-on collision",
+                        "measure": "restitution",
+                        "law": law,
+                        "integrator": integ,
+                        "precision": "f64",
+                        "ratio": h,
+                        "dt": h * 1e-4,
+                        "error": 0.05 * (h / h0) ** power,
+                        "value": None,
+                        "wall_per_simulated_s": 1e-3 / h,
+                        "status": "complete",
+                    }
+                )
+    orders = dem_analysis._orders(points, {})
+    for law in ("coulomb", "rate-state"):
+        euler = orders[f"face-on collision: restitution/{law}/euler/f64"]
+        analytic = orders[f"face-on collision: restitution/{law}/analytic/f64"]
+        assert euler["order"] == pytest.approx(1.0, abs=0.01)
+        assert analytic["order"] == pytest.approx(2.0, abs=0.01)
+    key = "face-on collision: restitution"
+    at_euler = dem_analysis.error_at(points, key, "euler")
+    at_analytic = dem_analysis.error_at(points, key, "analytic")
+    # Interpolated log-log between 0.2 and 0.8: exact for a power law.
+    assert at_euler(0.4) == pytest.approx(0.1, rel=1e-9)
+    assert at_analytic(0.4) == pytest.approx(0.05, rel=1e-9)
+    assert at_analytic(1.6) is None  # beyond the ladder
+    limits = {"jam": {"largest_surviving_ratio": 2.0}}
+    picked = {
+        integ: dem_stability.recommend(
+            limits, {key: dem_analysis.error_at(points, key, integ)}, {key: 0.06}
+        )["dt_safety"]
+        for integ in ("euler", "analytic")
+    }
+    # Euler: 0.05 (s / 0.2) <= 0.06 up to s = 0.24; analytic: 0.05 (s / 0.4)^2 up to 0.438
+    # (the candidates: 0.2 and 0.4).
+    assert picked == {"euler": 0.2, "analytic": 0.4}
+    summary = {
+        "points": points,
+        "orders": orders,
+        "timing": {"collision/coulomb/analytic/f64": {"wall_per_step_s": 4e-6}},
+        "settings": {
+            "laws": ["coulomb", "rate-state"],
+            "integrators": ["euler", "analytic"],
+            "stable_dt": {"collisions": 1e-4, "pillar, pushed box": 1e-4},
+        },
+        "pillar_parting_at_a_quarter_step": [],
+        "chaos": {},
+    }
+    text = dem_charts.tables(summary)
+    assert "| face-on collision: restitution | coulomb | analytic | f64 |" in text
+    assert "coulomb, analytic" in text  # the orders' column
+    assert "| 2.00 (0.00) |" in text
+
+
+def test_validate_refuses_an_unknown_integrator_in_one_line(capsys):
+    from taichi_ice.commands import validate
+
+    with pytest.raises(SystemExit) as exc:
+        validate.main(["dem_accuracy", "--integrators", "euler,verlet", "--out", "unused"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "unknown integrator(s) verlet" in err and "euler, analytic" in err
+    assert "Traceback" not in err

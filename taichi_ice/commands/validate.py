@@ -55,6 +55,14 @@ def build_parser() -> argparse.ArgumentParser:
                 action="store_true",
                 help="analyse the runs already in --out, run nothing",
             )
+            p.add_argument(
+                "--integrators",
+                type=_integrators,
+                default=None,
+                metavar="LIST",
+                help="integrators compared, comma-separated, e.g. 'euler' or 'euler,analytic' "
+                "(default: both; --quick: euler)",
+            )
         if name == "speed_accuracy":
             p.add_argument("--arch", default="cpu", help="Taichi arch (cpu or gpu)")
             p.add_argument("--interfaces", type=int, default=None, help="interfaces timed")
@@ -64,15 +72,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _integrators(text: str) -> tuple[str, ...]:
+    from ..engine.options import INTEGRATORS
+
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    unknown = [x for x in names if x not in INTEGRATORS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown integrator(s) {', '.join(unknown) or repr(text)}: choose from "
+            f"{', '.join(INTEGRATORS)}, comma-separated"
+        )
+    return names
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     study = importlib.import_module(f"taichi_ice.experiments.validation.{args.study}")
     if args.study == "dem_accuracy":
         if args.worker:
-            cfg = study.config(args.quick, args.until)
+            cfg = study.config(args.quick, args.until, args.integrators)
             study.worker(args.worker, args.out, cfg, log=study.log)
         else:
-            study.run(args.out, quick=args.quick, until=args.until, reuse=args.reuse)
+            study.run(
+                args.out,
+                quick=args.quick,
+                until=args.until,
+                reuse=args.reuse,
+                integrators=args.integrators,
+            )
     elif args.study == "speed_accuracy":
         if args.worker:
             n = args.interfaces or (study.QUICK_N_INTERFACES if args.quick else study.N_INTERFACES)

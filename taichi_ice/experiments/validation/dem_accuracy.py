@@ -2,8 +2,10 @@
 
 For time steps from well below to beyond the computed stability limit (``dt`` as a multiple
 ``ratio`` of ``stable_dt``; ``force_dt`` past it), in float64 and float32, with Coulomb
-friction (mu = 0.5) and the paper's rate-and-state law, the error against a reference and
-the wall time per simulated second, on (scenes in ``dem_scenes``):
+friction (mu = 0.5) and the paper's rate-and-state law, and with each integrator
+(``Options.integrator``: ``euler``, the default, and ``analytic``, each contact's
+spring-dashpot solved over the step), the error against a reference and the wall time per
+simulated second, on (scenes in ``dem_scenes``):
 
 - **collisions** of a square and a block, face on and offset, against the ODE of the same
   contact law (``collision_ode``, SciPy; face on also its closed form): restitution, contact
@@ -12,14 +14,16 @@ the wall time per simulated second, on (scenes in ``dem_scenes``):
   ``max |residual| / work in``, which has no reference but zero;
 - the **paper's scene** (``pillar``, 20 s): the peak pillar force (its 10 ms mean, as
   sampled), the frictional energy and the block positions against the float64 run at a
-  quarter of the default step (``REFERENCE_RATIO``), up to the time the default step's run
-  parts from it (a block 1 cm from its twin: the scene is chaotic) or ``PILLAR_UNTIL``; when
-  every run parts from the run at a quarter of its step (over the paper's 20 s for 0.8
-  against 0.2); and, at ``NUDGED_RATIOS``, when two runs part that differ only in the last
-  bit of the x of the block that meets the pillar first.
+  quarter of the default step (``REFERENCE_RATIO``; each integrator its own, and the two
+  references against each other), up to the time the default step's run parts from it (a
+  block 1 cm from its twin: the scene is chaotic) or ``PILLAR_UNTIL``; when every run parts
+  from the run at a quarter of its step (over the paper's 20 s for 0.8 against 0.2); and, at
+  ``NUDGED_RATIOS``, when two runs part that differ only in the last bit of the x of the
+  block that meets the pillar first (the 20 s runs: Euler only).
 
 **Stability** (``dem_stability``): the largest ratio a free collision, a dense field and a
-jam at full load survive, and from it and the errors the recommended ``dt_safety``.
+jam at full load survive, per integrator, and from them and the errors the recommended
+``dt_safety`` of each integrator.
 
 Cost: ``wall per simulated second = (wall per step) / dt``, the wall per step measured on a
 world alone at the default ratio (per scene, law and precision), over ``TIMING_SPAN`` more
@@ -55,6 +59,7 @@ import numpy as np
 from . import dem_scenes
 
 LAWS = ("coulomb", "rate-state")
+INTEGRATORS = ("euler", "analytic")  # engine.options.INTEGRATORS, the default first
 COLLISIONS = dem_scenes.COLLISIONS
 # dt / stable_dt of the collisions (batched: four worlds per dt). Every new dt compiles the
 # kernels afresh (~10 s on 2 cores, ~2 s once Taichi's offline cache holds them), so float32,
@@ -91,6 +96,7 @@ TIMING_SPAN = 2.0
 QUICK = {
     "precisions": ("f64",),
     "laws": ("coulomb",),
+    "integrators": ("euler",),
     "collision_ratios": (0.1,),
     "pillar_ratios": (),
     "box_ratios": (0.8,),
@@ -103,11 +109,15 @@ QUICK = {
 }
 
 
-def config(quick: bool = False, until: float | None = None) -> dict[str, Any]:
-    """The study's settings (``QUICK`` when quick); ``until`` (s) replaces ``PILLAR_UNTIL``."""
+def config(
+    quick: bool = False, until: float | None = None, integrators: tuple[str, ...] | None = None
+) -> dict[str, Any]:
+    """The study's settings (``QUICK`` when quick); ``until`` (s) replaces ``PILLAR_UNTIL``,
+    ``integrators`` the integrators compared (``INTEGRATORS``; quick: Euler alone)."""
     out = {
         "precisions": ("f64", "f32"),
         "laws": LAWS,
+        "integrators": INTEGRATORS,
         "collision_ratios": None,  # per precision: COLLISION_RATIOS
         "pillar_ratios": None,  # per precision: PILLAR_RATIOS
         "box_ratios": None,  # per precision: BOX_RATIOS
@@ -123,6 +133,13 @@ def config(quick: bool = False, until: float | None = None) -> dict[str, Any]:
         out.update(QUICK)
     if until is not None:
         out["pillar_until"] = float(until)
+    if integrators is not None:
+        from ...engine.options import INTEGRATORS as KNOWN
+
+        unknown = [i for i in integrators if i not in KNOWN]
+        if unknown or not integrators:
+            raise ValueError(f"integrators must be some of {KNOWN}, got {integrators!r}")
+        out["integrators"] = tuple(integrators)
     out["quick"] = quick
     return out
 
@@ -181,7 +198,9 @@ def _run(sim, until: float, out=None) -> tuple[dict[str, Any], Any]:
         }, None
 
 
-def run_collisions(store: Store, precision: str, cfg: dict[str, Any], log) -> None:
+def run_collisions(
+    store: Store, precision: str, cfg: dict[str, Any], log, integrator: str = "euler"
+) -> None:
     """Every collision ratio as one batch of (face on, offset) x laws; then the timing runs."""
     from ...run.simulation import Simulation
 
@@ -193,7 +212,7 @@ def run_collisions(store: Store, precision: str, cfg: dict[str, Any], log) -> No
         dt = ratio * stable
         batch = [dem_scenes.with_step(scenes[k], dt, end) for k in keys]
         start = time.perf_counter()
-        sim = Simulation(batch, dt=dt, force_dt=True, precision=precision)
+        sim = Simulation(batch, dt=dt, force_dt=True, precision=precision, integrator=integrator)
         info, _ = _run(sim, until=batch[0].simulation.series_interval)
         for w, (kind, law) in enumerate(keys):
             state = {
@@ -206,6 +225,7 @@ def run_collisions(store: Store, precision: str, cfg: dict[str, Any], log) -> No
                 {
                     "scene": kind,
                     "law": law,
+                    "integrator": integrator,
                     "precision": precision,
                     "ratio": sim.dt / stable,
                     "dt": sim.dt,
@@ -215,20 +235,27 @@ def run_collisions(store: Store, precision: str, cfg: dict[str, Any], log) -> No
                 state,
             )
         log(
-            f"dem accuracy [{precision}] collisions at dt = {sim.dt / stable:.4f} x stable_dt: "
+            f"dem accuracy [{precision}, {integrator}] collisions at dt = "
+            f"{sim.dt / stable:.4f} x stable_dt: "
             f"{info['status']} [{time.perf_counter() - start:.1f} s]"
         )
     for law in cfg["laws"]:
         # The offset collision alone at the default step: run once (compiling), then timed.
         scene = dem_scenes.collision(dem_scenes.OFFSET, law)
         dt = DEFAULT_RATIO * stable
-        sim = Simulation(dem_scenes.with_step(scene, dt, SAMPLE), dt=dt, precision=precision)
+        sim = Simulation(
+            dem_scenes.with_step(scene, dt, SAMPLE),
+            dt=dt,
+            precision=precision,
+            integrator=integrator,
+        )
         info, _ = _run(sim, until=end)
         store.add(
             {
                 "kind": "timing",
                 "scene": "collision",
                 "law": law,
+                "integrator": integrator,
                 "precision": precision,
                 "dt": sim.dt,
                 **_timed(sim, COLLISION_TIMING_UNTIL - sim.time),
@@ -272,11 +299,13 @@ def _timed(sim, span: float) -> dict[str, Any]:
 
 
 def _field_run(store, precision, sim_worlds, labels, dt, until, stable, alone, tmp, log):
-    """One Simulation of field worlds; each world's series and frames into the store."""
+    """One Simulation of field worlds (of one integrator, ``labels[0]["integrator"]``); each
+    world's series and frames into the store."""
     from ...run.simulation import Simulation
 
     start = time.perf_counter()
-    sim = Simulation(sim_worlds, dt=dt, force_dt=True, precision=precision)
+    integrator = labels[0]["integrator"]
+    sim = Simulation(sim_worlds, dt=dt, force_dt=True, precision=precision, integrator=integrator)
     paths = [tmp / f"{precision}-{i}.h5" for i in range(len(labels))]
     info, _ = _run(sim, until=until, out=paths)
     timing = _timed(sim, TIMING_SPAN) if alone and info["status"] == "complete" else {}
@@ -299,18 +328,22 @@ def _field_run(store, precision, sim_worlds, labels, dt, until, stable, alone, t
         f"{x['scene']} {x['law']}{' (nudged)' if x['nudged'] else ''}" for x in labels
     )
     log(
-        f"dem accuracy [{precision}] {names} at dt = {sim.dt / stable:.4f} x stable_dt to "
+        f"dem accuracy [{precision}, {integrator}] {names} at dt = {sim.dt / stable:.4f} x "
+        f"stable_dt to "
         f"{until:g} s: {info['status']} [{time.perf_counter() - start:.1f} s]"
     )
 
 
-def run_fields(store: Store, precision: str, cfg: dict[str, Any], tmp: Path, log) -> None:
+def run_fields(
+    store: Store, precision: str, cfg: dict[str, Any], tmp: Path, log, integrator: str = "euler"
+) -> None:
     """The pillar scene and the pushed box at every ratio of their ladders.
 
     Each law's worlds of a scene run batched; at ``DEFAULT_RATIO`` each world runs alone
     (then timed, ``_timed``); at ``long_ratios`` the pillar scene runs ``long_until``, at
-    ``nudged_ratios`` beside its twins nudged by the last bit of one x (float64 only; a world
-    is bit-identical batched and alone, so the runs alone at a long ratio are for timing).
+    ``nudged_ratios`` beside its twins nudged by the last bit of one x (float64 and Euler
+    only; a world is bit-identical batched and alone, so the runs alone at a long ratio are
+    for timing).
     """
     makers = {"pillar": dem_scenes.pillar, "pushed box": dem_scenes.pushed_box}
     laws = cfg["laws"]
@@ -323,7 +356,7 @@ def run_fields(store: Store, precision: str, cfg: dict[str, Any], tmp: Path, log
     ):
         for ratio in ratios(cfg, kind, precision):
             dt = field_step(ratio, stable)
-            f64_pillar = scene == "pillar" and precision == "f64"
+            f64_pillar = scene == "pillar" and precision == "f64" and integrator == "euler"
             alone = math.isclose(ratio, DEFAULT_RATIO) and not cfg["quick"]
             long = f64_pillar and any(math.isclose(ratio, r) for r in cfg["long_ratios"])
             nudged = f64_pillar and any(math.isclose(ratio, r) for r in cfg["nudged_ratios"])
@@ -344,6 +377,7 @@ def run_fields(store: Store, precision: str, cfg: dict[str, Any], tmp: Path, log
                     {
                         "scene": scene,
                         "law": law,
+                        "integrator": integrator,
                         "nudged": n,
                         "nudged_body": block if n else None,
                         "timing_only": timing_only,
@@ -361,12 +395,15 @@ def worker(precision: str, folder: Path, cfg: dict[str, Any], log) -> dict[str, 
     backend.init("cpu", precision)
     store = Store(folder)
     start = time.perf_counter()
-    run_collisions(store, precision, cfg, log)
-    with tempfile.TemporaryDirectory(dir=folder) as tmp:
-        run_fields(store, precision, cfg, Path(tmp), log)
+    for integrator in cfg["integrators"]:
+        run_collisions(store, precision, cfg, log, integrator)
+        with tempfile.TemporaryDirectory(dir=folder) as tmp:
+            run_fields(store, precision, cfg, Path(tmp), log, integrator)
     index: dict[str, Any] = {"precision": precision, "records": store.records}
     if precision == "f64" and cfg["stability"]:
-        index["stability"] = dem_stability.run_all(log=log)
+        index["stability"] = {
+            i: dem_stability.run_all(log=log, integrator=i) for i in cfg["integrators"]
+        }
     index["wall_s"] = time.perf_counter() - start
     (folder / "index.json").write_text(json.dumps(index, default=_jsonable))
     return index
@@ -382,7 +419,7 @@ def _jsonable(x):
     raise TypeError(type(x))
 
 
-def _spawn(precision: str, folder: Path, quick: bool, until: float | None) -> dict[str, Any]:
+def _spawn(precision: str, folder: Path, quick: bool, until: float | None, integrators) -> dict:
     root = str(Path(__file__).resolve().parents[3])  # the folder that holds taichi_ice/
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
@@ -398,6 +435,8 @@ def _spawn(precision: str, folder: Path, quick: bool, until: float | None) -> di
     ] + (["--quick"] if quick else [])
     if until is not None:
         cmd += ["--until", str(until)]
+    if integrators is not None:
+        cmd += ["--integrators", ",".join(integrators)]
     proc = subprocess.run(cmd, env=env, check=False)
     if proc.returncode != 0:
         raise RuntimeError(f"dem accuracy worker for {precision} failed: {' '.join(cmd)}")
@@ -410,7 +449,12 @@ def _spawn(precision: str, folder: Path, quick: bool, until: float | None) -> di
 
 
 def run(
-    out_dir: str | Path, *, quick: bool = False, until: float | None = None, reuse: bool = False
+    out_dir: str | Path,
+    *,
+    quick: bool = False,
+    until: float | None = None,
+    reuse: bool = False,
+    integrators: tuple[str, ...] | None = None,
 ) -> dict:
     """Every run, then the analysis, chart and JSON; returns the JSON summary as a dict.
 
@@ -418,6 +462,7 @@ def run(
         out_dir: output folder (``dem_accuracy.json``, the PNGs, ``dem_runs/``).
         quick: float64 and Coulomb only, two steps per scene, short runs (``QUICK``).
         until: seconds of the pillar scene's runs (default ``PILLAR_UNTIL``).
+        integrators: those compared (default ``INTEGRATORS``; quick: Euler alone).
         reuse: analyse the runs already in ``out_dir/dem_runs`` (from an earlier call with
             the same settings) instead of running them again.
     """
@@ -434,7 +479,7 @@ def run(
         ) from None
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    cfg = config(quick, until)
+    cfg = config(quick, until, integrators)
     start = time.perf_counter()
     parts = {}
     for precision in cfg["precisions"]:
@@ -447,7 +492,7 @@ def run(
             # A fresh process for each precision, whatever this one runs: Taichi holds one
             # precision per process, and compiles faster in a process with few kernels.
             log(f"dem accuracy: {precision} worker process ...")
-            parts[precision] = _spawn(precision, folder, quick, until)
+            parts[precision] = _spawn(precision, folder, quick, until, integrators)
     summary = dem_analysis.analyse(parts, out_dir / "dem_runs", cfg, log=log)
     summary["wall_s"] = time.perf_counter() - start
     figure = out_dir / "dem_accuracy.png"

@@ -11,9 +11,13 @@ Errors (relative unless said):
   to the last overlap of the free flight traced back from the end), the square's spin after;
 - pushed box: ``max_t |budget residual| / work in`` (no reference: zero is exact);
 - pillar: peak pillar force, frictional energy and the largest block displacement (m)
-  against the float64 reference run (a quarter of the default step), up to the time ``T``
-  when the run at the default step parts from it (a block ``PART`` from its twin, at the
-  0.1 s frames; each law its own ``T``); positions at ``T``.
+  against the float64 reference run (a quarter of the default step) of the same integrator,
+  up to the time ``T`` when the run at the default step parts from it (a block ``PART`` from
+  its twin, at the 0.1 s frames; each law and integrator its own ``T``); positions at ``T``.
+  The references of the two integrators are also held against each other.
+
+Every record and point names its friction law (``law``) and its ``integrator`` (records
+from before the integrators were compared have none: Euler).
 
 Orders: ``error = C (h^p - h_ref^p)`` (``h = dt / stable_dt``; ``h_ref`` that of the
 reference run, 0 for the ODE) fitted in log space over the steps at or below
@@ -76,15 +80,26 @@ def _load(parts: dict[str, Any], runs_dir: Path) -> list[dict[str, Any]]:
     return records
 
 
-def _timing(records: list[dict[str, Any]]) -> dict[tuple[str, str, str], dict[str, Any]]:
-    """Wall per step of one world alone (its kernels compiled), per (scene, law, precision);
-    from a batch (its wall per step, compilation included) where no such run exists."""
-    out: dict[tuple[str, str, str], dict[str, Any]] = {}
+def integrator_of(r: dict[str, Any]) -> str:
+    """A record's or point's integrator (Euler where none is named)."""
+    return r.get("integrator") or "euler"
+
+
+def label(law: str, integrator: str) -> str:
+    """How the charts and tables name a law run with an integrator."""
+    return law if integrator == "euler" else f"{law}, {integrator}"
+
+
+def _timing(records: list[dict[str, Any]]) -> dict[tuple[str, ...], dict[str, Any]]:
+    """Wall per step of one world alone (its kernels compiled), per (scene, law, integrator,
+    precision); from a batch (its wall per step, compilation included) where no such run
+    exists."""
+    out: dict[tuple[str, ...], dict[str, Any]] = {}
     for r in records:
         scene = "collision" if r.get("kind") == "timing" else r.get("scene")
         if scene not in ("collision", "pillar", "pushed box") or r.get("nudged"):
             continue
-        key = (scene, r["law"], r["precision"])
+        key = (scene, r["law"], integrator_of(r), r["precision"])
         if r.get("wall_per_step_s"):
             out[key] = {
                 "wall_per_step_s": r["wall_per_step_s"],
@@ -157,12 +172,13 @@ def _restitution(velocity) -> float:
 
 
 def _point(r, measure, err, timing, cost_scene, value=None, **extra) -> dict[str, Any]:
-    t = timing.get((cost_scene, r["law"], r["precision"]))
+    t = timing.get((cost_scene, r["law"], integrator_of(r), r["precision"]))
     cost = t["wall_per_step_s"] / r["dt"] if t else None
     out = {
         "scene": r["scene"],
         "measure": measure,
         "law": r["law"],
+        "integrator": integrator_of(r),
         "precision": r["precision"],
         "ratio": r["ratio"],
         "dt": r["dt"],
@@ -206,8 +222,9 @@ def first_time(t: np.ndarray, gap: np.ndarray, threshold: float) -> float | None
 
 
 def _pillar(records, timing, cfg, dynamic) -> tuple[list, list, dict]:
-    """Errors of every pillar run against the float64 reference, over each law's window; and
-    when the runs at a step and at a quarter of it part."""
+    """Errors of every pillar run against the float64 reference of its integrator, over each
+    (law, integrator)'s window; when the runs at a step and at a quarter of it part; and the
+    two integrators' references against each other."""
     records = [
         r
         for r in records
@@ -215,19 +232,22 @@ def _pillar(records, timing, cfg, dynamic) -> tuple[list, list, dict]:
     ]
     ref_ratio = _ratio_of(records, cfg)
     refs = {
-        r["law"]: r
+        (r["law"], integrator_of(r)): r
         for r in records
-        if r["precision"] == "f64" and math.isclose(r["ratio"], ref_ratio)
+        if r["precision"] == "f64" and math.isclose(r["ratio"], ref_ratio) and "data" in r
     }
-    by = {(r["law"], r["precision"], round(r["ratio"], 6)): r for r in records if "data" in r}
+    by = {
+        (r["law"], integrator_of(r), r["precision"], round(r["ratio"], 6)): r
+        for r in records
+        if "data" in r
+    }
     pairs = []
-    for (law, prec, _), r in sorted(by.items()):
+    for (law, integ, prec, _), r in sorted(by.items()):
         fine = next(
             (
                 v
-                for (lw, p, _), v in by.items()
-                if lw == law
-                and p == prec
+                for (lw, i, p, _), v in by.items()
+                if (lw, i, p) == (law, integ, prec)
                 and math.isclose(v["ratio"] * 4, r["ratio"], rel_tol=1e-9)
             ),
             None,
@@ -238,6 +258,7 @@ def _pillar(records, timing, cfg, dynamic) -> tuple[list, list, dict]:
         pairs.append(
             {
                 "law": law,
+                "integrator": integ,
                 "precision": prec,
                 "ratio": r["ratio"],
                 "quarter": fine["ratio"],
@@ -248,42 +269,35 @@ def _pillar(records, timing, cfg, dynamic) -> tuple[list, list, dict]:
                 "largest_gap_m": gap.tolist(),
             }
         )
-    # Each law's window: until the run at the default step parts from the reference (a
-    # quarter of its step), or the whole run.
+    # Each (law, integrator)'s window: until the run at the default step parts from the
+    # reference (a quarter of its step), or the whole run.
     windows = {}
-    for law, ref in refs.items():
+    for (law, integ), ref in refs.items():
         pair = next(
             (
                 p
                 for p in pairs
-                if p["law"] == law
-                and p["precision"] == "f64"
+                if (p["law"], p["integrator"], p["precision"]) == (law, integ, "f64")
                 and math.isclose(p["quarter"], ref["ratio"])
             ),
             None,
         )
         whole = float(ref["data"]["time"][-1])
-        windows[law] = pair["parted_at"] if pair and pair["parted_at"] is not None else whole
+        windows[law, integ] = pair["parted_at"] if pair and pair["parted_at"] is not None else whole
     points = []
     for r in records:
-        if r["law"] not in refs or r is refs[r["law"]] or "data" not in r:
+        key = (r["law"], integrator_of(r))
+        if key not in refs or r is refs[key] or "data" not in r:
             continue
-        d, rd = r["data"], refs[r["law"]]["data"]
-        end = windows[r["law"]]
+        d, rd = r["data"], refs[key]["data"]
+        end = windows[key]
         t, gap = separation(d, rd, dynamic)
         extra = {"parted_at": first_time(t, gap, PART), "compared_to": end}
         if r["status"] != "complete" and float(d["time"][-1]) < end - 1e-9:
             for m in MEASURES["pillar"]:
                 points.append(_point(r, m, None, timing, "pillar", **extra))
             continue
-        values = {}
-        for name, run in (("got", d), ("ref", rd)):
-            use = run["time"] <= end + 1e-9
-            force = np.linalg.norm(run["probe_force"][use, 0, :], axis=-1)
-            values[name] = {
-                "peak force": float(force.max()),
-                "friction energy": float(run["friction_energy"][use][-1]),
-            }
+        values = {"got": _pillar_values(d, end), "ref": _pillar_values(rd, end)}
         errors = {
             m: abs(values["got"][m] / values["ref"][m] - 1.0) if values["ref"][m] else None
             for m in ("peak force", "friction energy")
@@ -294,17 +308,44 @@ def _pillar(records, timing, cfg, dynamic) -> tuple[list, list, dict]:
                 _point(r, m, errors[m], timing, "pillar", value=values["got"].get(m), **extra)
             )
     reference = {
-        law: {
+        f"{law}/{integ}": {
+            "law": law,
+            "integrator": integ,
             "ratio": r["ratio"],
             "dt": r["dt"],
             "status": r["status"],
-            "window_s": windows[law],
+            "window_s": windows[law, integ],
             "peak_force_N": float(np.linalg.norm(r["data"]["probe_force"][:, 0, :], axis=-1).max()),
             "friction_energy_J": float(r["data"]["friction_energy"][-1]),
         }
-        for law, r in refs.items()
+        for (law, integ), r in refs.items()
     }
+    # The references of two integrators converge to one solution: held against each other
+    # over the shorter of their windows.
+    for (law, integ), r in refs.items():
+        base = refs.get((law, "euler"))
+        if integ == "euler" or base is None:
+            continue
+        end = min(windows[law, integ], windows[law, "euler"])
+        t, gap = separation(r["data"], base["data"], dynamic)
+        mine, theirs = _pillar_values(r["data"], end), _pillar_values(base["data"], end)
+        reference[f"{law}/{integ}"]["against_euler"] = {
+            "until_s": end,
+            "parted_at": first_time(t, gap, PART),
+            "positions": float(gap[int(np.searchsorted(t, end + 1e-9)) - 1]),
+            **{m: abs(mine[m] / theirs[m] - 1.0) if theirs[m] else None for m in mine},
+        }
     return points, pairs, reference
+
+
+def _pillar_values(run: dict[str, np.ndarray], end: float) -> dict[str, float]:
+    """The pillar measures of one run up to ``end`` (s)."""
+    use = run["time"] <= end + 1e-9
+    force = np.linalg.norm(run["probe_force"][use, 0, :], axis=-1)
+    return {
+        "peak force": float(force.max()),
+        "friction energy": float(run["friction_energy"][use][-1]),
+    }
 
 
 def _ratio_of(records, cfg) -> float:
@@ -327,13 +368,16 @@ def _chaos(records, dynamic) -> dict[str, Any]:
             r
             for r in runs
             if r["law"] == law
+            and integrator_of(r) == integrator_of(twin)
             and not r.get("nudged")
             and not r.get("timing_only")
             and r["precision"] == twin["precision"]
             and r["dt"] == twin["dt"]
         )
         t, gap = separation(base["data"], twin["data"], dynamic)
-        out[law] = {
+        out[label(law, integrator_of(twin))] = {
+            "law": law,
+            "integrator": integrator_of(twin),
             "ratio": base["ratio"],
             "dt": base["dt"],
             "nudged_body": twin["nudged_body"],
@@ -376,17 +420,18 @@ def fit_order(
     }
 
 
+def _series_key(p: dict[str, Any]) -> tuple[str, str, str, str, str]:
+    """What a point's error series is: (scene, measure, law, integrator, precision)."""
+    return (p["scene"], p["measure"], p["law"], integrator_of(p), p["precision"])
+
+
 def _orders(points, h_refs) -> dict[str, Any]:
+    """Each series' fitted order, keyed ``"scene: measure/law/integrator/precision"``."""
     out = {}
-    keys = sorted({(p["scene"], p["measure"], p["law"], p["precision"]) for p in points})
-    for scene, measure, law, prec in keys:
+    for key in sorted({_series_key(p) for p in points}):
+        scene, measure, law, integ, prec = key
         mine = sorted(
-            (
-                p
-                for p in points
-                if (p["scene"], p["measure"], p["law"], p["precision"])
-                == (scene, measure, law, prec)
-            ),
+            (p for p in points if _series_key(p) == key),
             key=lambda p: p["ratio"],
         )
         fit = fit_order(
@@ -396,15 +441,17 @@ def _orders(points, h_refs) -> dict[str, Any]:
             prec,
             ORDER_MAX_RATIO_OF.get(scene, ORDER_MAX_RATIO),
         )
-        out[f"{scene}: {measure}/{law}/{prec}"] = fit
+        out[f"{scene}: {measure}/{law}/{integ}/{prec}"] = fit
     return out
 
 
-def error_at(points, key: str) -> Callable[[float], float | None]:
+def error_at(points, key: str, integrator: str = "euler") -> Callable[[float], float | None]:
     """The float64 error of ``key`` ("scene: measure", the largest over the laws, or "scene:
-    measure/law") at a ratio, log-log interpolated on the ladder (None beyond it)."""
+    measure/law") with ``integrator`` at a ratio, log-log interpolated on the ladder (None
+    beyond it)."""
     scene, measure = key.split(": ")
     measure, _, only = measure.partition("/")
+    points = [p for p in points if integrator_of(p) == integrator]
     curves = []
     for law in sorted({p["law"] for p in points if not only or p["law"] == only}):
         mine = sorted(
@@ -452,6 +499,7 @@ def analyse(parts: dict[str, Any], runs_dir: Path, cfg: dict[str, Any], log=prin
         "settings": {
             "quick": cfg["quick"],
             "laws": list(cfg["laws"]),
+            "integrators": list(cfg.get("integrators", ("euler",))),
             "precisions": list(cfg["precisions"]),
             "pillar_until_s": cfg["pillar_until"],
             "box_until_s": cfg["box_until"],
@@ -467,7 +515,7 @@ def analyse(parts: dict[str, Any], runs_dir: Path, cfg: dict[str, Any], log=prin
         },
         "collision_reference": ode,
         "pillar_reference": pillar_ref,
-        "timing": {"/".join(k): v for k, v in sorted(timing.items())},
+        "timing": {"/".join(k): v for k, v in sorted(timing.items())},  # scene/law/integ/prec
         "orders": orders,
         "pillar_parting_at_a_quarter_step": pairs,
         "chaos": _chaos(records, dynamic),
@@ -475,19 +523,32 @@ def analyse(parts: dict[str, Any], runs_dir: Path, cfg: dict[str, Any], log=prin
     }
     stability = parts.get("f64", {}).get("stability")
     if stability:
+        if "jam" in stability:  # runs from before the integrators were compared: Euler's
+            stability = {"euler": stability}
+        # Per integrator: {scene: its limit}, and the dt_safety each would recommend.
         summary["stability"] = stability
-        summary["stability_ratio"] = {k: v["largest_surviving_ratio"] for k, v in stability.items()}
-        funcs = {m: error_at(points, m) for m in ACCURACY}
-        # Only the measures this run has float64 errors of (--quick has fewer).
-        accuracy = {m: a for m, a in ACCURACY.items() if funcs[m](0.1) is not None}
-        rec = dem_stability.recommend(stability, funcs, accuracy)
-        rec["errors_at_recommended"] = (
-            {m: f(rec["dt_safety"]) for m, f in funcs.items()} if rec["dt_safety"] else None
-        )
-        rec["errors_at_0.2"] = {m: f(0.2) for m, f in funcs.items()}
-        summary["recommendation"] = rec
+        summary["stability_ratio"] = {
+            integ: {k: v["largest_surviving_ratio"] for k, v in limits.items()}
+            for integ, limits in stability.items()
+        }
+        summary["recommendation"] = {
+            integ: _recommend(points, limits, integ) for integ, limits in stability.items()
+        }
     _report(summary, log)
     return summary
+
+
+def _recommend(points, limits: dict[str, Any], integrator: str) -> dict[str, Any]:
+    """``dem_stability.recommend`` for one integrator, with its errors there and at 0.2."""
+    funcs = {m: error_at(points, m, integrator) for m in ACCURACY}
+    # Only the measures this run has float64 errors of (--quick has fewer).
+    accuracy = {m: a for m, a in ACCURACY.items() if funcs[m](0.1) is not None}
+    rec = dem_stability.recommend(limits, funcs, accuracy)
+    rec["errors_at_recommended"] = (
+        {m: f(rec["dt_safety"]) for m, f in funcs.items()} if rec["dt_safety"] else None
+    )
+    rec["errors_at_0.2"] = {m: f(0.2) for m, f in funcs.items()}
+    return rec
 
 
 def _report(summary: dict[str, Any], log) -> None:
@@ -502,11 +563,10 @@ def _report(summary: dict[str, Any], log) -> None:
             f"dem accuracy: {law}: runs that differ in the last bit depart at "
             f"{c['departed_at']} s and part at {c['parted_at']} s (of {c['until']:g} s)"
         )
-    rec = summary.get("recommendation")
-    if rec:
+    for integ, rec in summary.get("recommendation", {}).items():
         log(
-            f"dem accuracy: stable ratios {summary['stability_ratio']}; recommended dt_safety "
-            f"{rec['dt_safety']}, margin in the jam {rec['jam_margin']}"
+            f"dem accuracy [{integ}]: stable ratios {summary['stability_ratio'][integ]}; "
+            f"recommended dt_safety {rec['dt_safety']}, margin in the jam {rec['jam_margin']}"
         )
 
 

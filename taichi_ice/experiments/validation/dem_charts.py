@@ -1,15 +1,17 @@
 """Charts of the DEM accuracy study: error against cost, and parting runs with the limits.
 
 ``plot_accuracy``: one panel per measure (``dem_analysis.MEASURES``), error against wall time
-per simulated second; colour is the law, solid float64 and dashed float32, filled markers
-at or below the computed stability limit and open ones beyond it, a ring at the default step
-(0.2 stable_dt); runs that diverged are crosses on the top edge. Along a line the step grows
-from left to right (the cost falls as 1 / dt); labels give dt / stable_dt.
+per simulated second; colour is the law and the integrator (circles Euler, squares the
+analytic step), solid float64 and dashed float32, filled markers at or below the computed
+stability limit and open ones beyond it, a ring at the default step (0.2 stable_dt); runs
+that diverged are crosses on the top edge. Along a line the step grows from left to right
+(the cost falls as 1 / dt); labels give dt / stable_dt.
 
 ``plot_stability``: (a) the largest distance between the same block in two runs of the
 pillar scene over time: runs that differ in the last bit of one position, and runs at a step
 and a quarter of it; (b) each stability trial at its dt / stable_dt, survived or diverged,
-with the computed limit (1), the default and the recommended dt_safety.
+per scene and integrator, with the computed limit (1), the default and each integrator's
+recommended dt_safety.
 """
 
 from __future__ import annotations
@@ -19,9 +21,17 @@ from typing import Any
 
 import numpy as np
 
-from .dem_analysis import MEASURES, PART
+from .dem_analysis import MEASURES, PART, integrator_of, label
 
-COLORS = {"coulomb": "C0", "rate-state": "C3"}
+# Colour of each law with each integrator (``dem_analysis.label``), marker of each integrator.
+COLORS = {
+    "coulomb": "C0",
+    "rate-state": "C3",
+    "coulomb, analytic": "C2",
+    "rate-state, analytic": "C1",
+}
+MARKERS = {"euler": "o", "analytic": "s"}
+INTEGRATOR_COLORS = {"euler": "C0", "analytic": "C2"}
 STYLES = {"f64": "-", "f32": "--"}
 UNITS = {"positions": "largest block displacement (m)"}
 
@@ -46,13 +56,15 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
     for ax, (scene, measure) in zip(axes.flat, panels):
         mine = [p for p in points if p["scene"] == scene and p["measure"] == measure]
         top = max([p["error"] for p in mine if p["error"]] or [1.0]) * 3.0
-        for law in COLORS:
+        for name in COLORS:
             for prec in STYLES:
                 line = sorted(
                     (
                         p
                         for p in mine
-                        if p["law"] == law and p["precision"] == prec and p["wall_per_simulated_s"]
+                        if label(p["law"], integrator_of(p)) == name
+                        and p["precision"] == prec
+                        and p["wall_per_simulated_s"]
                     ),
                     key=lambda p: p["ratio"],
                 )
@@ -61,14 +73,15 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
                     continue
                 x = [p["wall_per_simulated_s"] for p in ok]
                 y = [p["error"] for p in ok]
-                color, ls = COLORS[law], STYLES[prec]
+                color, ls = COLORS[name], STYLES[prec]
+                marker = MARKERS[integrator_of(line[0])]
                 ax.loglog(x, y, ls=ls, color=color, lw=1.0)
                 for p in ok:
                     beyond = p["ratio"] > 1.0
                     ax.plot(
                         p["wall_per_simulated_s"],
                         p["error"],
-                        "o",
+                        marker,
                         ms=4,
                         color=color,
                         mfc="none" if beyond else color,
@@ -86,7 +99,7 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
                 for p in line:
                     if p["error"] is None:
                         ax.plot(p["wall_per_simulated_s"], top, "x", color=color, ms=6)
-                if law == "coulomb" and prec == "f64":
+                if line[0]["law"] == "coulomb" and prec == "f64":
                     for p in ok:
                         ax.annotate(
                             f"{p['ratio']:.2g}",
@@ -101,7 +114,10 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
         ax.set_xlabel("wall time per simulated second (s), one world alone")
         ax.set_ylabel(UNITS.get(measure, "relative error"))
         ax.grid(True, which="major", alpha=0.3)
-    handles = [Line2D([], [], color=c, label=law) for law, c in COLORS.items()]
+    handles = [
+        Line2D([], [], color=c, marker="s" if "analytic" in name else "o", label=name)
+        for name, c in COLORS.items()
+    ]
     handles += [Line2D([], [], color="k", ls=s, label=p) for p, s in STYLES.items()]
     handles += [
         Line2D([], [], color="k", marker="o", ls="none", label="dt <= stable_dt"),
@@ -111,12 +127,14 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
     ]
     axes.flat[0].legend(handles=handles, fontsize=7, loc="lower left", ncol=2)
     windows = ", ".join(
-        f"{law} {v['window_s']:.3g} s" for law, v in summary.get("pillar_reference", {}).items()
+        f"{label(v.get('law', key), integrator_of(v))} {v['window_s']:.3g} s"
+        for key, v in summary.get("pillar_reference", {}).items()
     )
     fig.suptitle(
         "DEM accuracy against cost (labels: dt / stable_dt). Collisions against the ODE of the "
         "contact law; pushed box: energy budget residual;\npillar scene: against dt = 0.05 "
-        f"stable_dt (a quarter of the default step) until the default step's run parts ({windows})",
+        "stable_dt (a quarter of the default step) of the same integrator, until the default "
+        f"step's run parts ({windows})",
         fontsize=11,
     )
     fig.savefig(path, dpi=75)
@@ -126,14 +144,14 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
 def plot_stability(summary: dict[str, Any], path: Path) -> None:
     plt = _plt()
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 4.8), constrained_layout=True)
-    for law, c in summary.get("chaos", {}).items():
+    for name, c in summary.get("chaos", {}).items():
         gap = np.maximum(np.asarray(c["largest_gap_m"]), 1e-17)
         ax.semilogy(
             c["time"],
             gap,
-            color=COLORS[law],
+            color=COLORS.get(name, "k"),
             lw=1.4,
-            label=f"{law}: last bit of one x (dt = {c['ratio']:.2g} stable)",
+            label=f"{name}: last bit of one x (dt = {c['ratio']:.2g} stable)",
         )
     for pair in summary.get("pillar_parting_at_a_quarter_step", []):
         if pair["precision"] != "f64" or "time" not in pair:
@@ -142,10 +160,11 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
             pair["time"],
             np.maximum(pair["largest_gap_m"], 1e-17),
             ls="--",
-            color=COLORS[pair["law"]],
+            color=COLORS[label(pair["law"], integrator_of(pair))],
             alpha=0.5,
             lw=0.9,
-            label=f"{pair['law']}: dt = {pair['ratio']:.2g} vs a quarter",
+            label=f"{label(pair['law'], integrator_of(pair))}: dt = {pair['ratio']:.2g} "
+            "vs a quarter",
         )
     ax.axhline(PART, color="0.5", lw=0.8)
     ax.text(0.2, PART * 1.5, f"parted ({PART * 100:g} cm)", fontsize=8, color="0.3")
@@ -154,24 +173,25 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
     ax.set_title("(a) pillar scene: when do two runs part?")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7, loc="lower right")
-    stability = summary.get("stability", {})
-    rec = summary.get("recommendation", {})
-    for row, res in enumerate(stability.values()):
+    rows = _stability_rows(summary)
+    recs = summary.get("recommendation", {})
+    for row, (integ, _, res) in enumerate(rows):
         for t in res["trials"]:
             ax2.plot(
                 t["ratio"],
                 row,
-                "o" if t["survived"] else "x",
+                MARKERS.get(integ, "o") if t["survived"] else "x",
                 color="C2" if t["survived"] else "C3",
                 ms=7,
             )
         lo = res["largest_surviving_ratio"]
         if lo:
             ax2.text(lo, row + 0.18, f"{lo:.2f}", fontsize=8, ha="center")
-    ax2.set_yticks(range(len(stability)))
-    ax2.set_yticklabels(list(stability))
-    ax2.set_ylim(-0.6, len(stability) - 0.4)
-    ax2.set_xlim(0.15, 4.0)
+    ax2.set_yticks(range(len(rows)))
+    ax2.set_yticklabels([name if i == "euler" else f"{name} ({i})" for i, name, _ in rows])
+    ax2.set_ylim(-0.6, len(rows) - 0.4)
+    largest = max((t["ratio"] for _, _, r in rows for t in r["trials"]), default=4.0)
+    ax2.set_xlim(0.15, max(4.0, largest * 1.3))
     ax2.set_xscale("log")
     from matplotlib.ticker import NullFormatter, ScalarFormatter
 
@@ -182,19 +202,30 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
     ax2.text(1.02, -0.5, "computed limit", fontsize=8)
     ax2.axvline(0.2, color="0.5", ls=":", lw=1.0)
     ax2.text(0.205, -0.5, "default 0.2", fontsize=8, color="0.3")
-    if rec.get("dt_safety"):
-        ax2.axvline(rec["dt_safety"], color="C2", ls="--", lw=1.0)
-        ax2.text(
-            rec["dt_safety"] * 1.02,
-            len(stability) - 0.55,
-            f"recommended {rec['dt_safety']:g}",
-            fontsize=8,
-            color="C2",
-        )
-    ax2.set_xlabel("dt / stable_dt (o survived, x diverged)")
+    for k, (integ, rec) in enumerate(recs.items()):
+        if rec.get("dt_safety"):
+            color = INTEGRATOR_COLORS.get(integ, "k")
+            ax2.axvline(rec["dt_safety"], color=color, ls="--", lw=1.0)
+            ax2.text(
+                rec["dt_safety"] * 1.02,
+                len(rows) - 0.55 - 0.35 * k,
+                f"recommended {rec['dt_safety']:g} ({integ})",
+                fontsize=8,
+                color=color,
+            )
+    ax2.set_xlabel("dt / stable_dt (o, s survived: Euler, analytic; x diverged)")
     ax2.set_title("(b) the largest step each scene survives")
     fig.savefig(path, dpi=80)
     plt.close(fig)
+
+
+def _stability_rows(summary: dict[str, Any]) -> list[tuple[str, str, dict[str, Any]]]:
+    """(integrator, scene, limit) of every stability search in the summary."""
+    return [
+        (integ, name, res)
+        for integ, limits in summary.get("stability", {}).items()
+        for name, res in limits.items()
+    ]
 
 
 # Columns of the error table: the nominal steps (the field scenes' dt is SAMPLE / n, a few
@@ -215,20 +246,25 @@ def tables(summary: dict[str, Any]) -> str:
     points = summary["points"]
     out = []
     ratios = sorted({_nominal(p["ratio"]) for p in points})
-    rows = sorted({(p["scene"], p["measure"], p["law"], p["precision"]) for p in points})
+    rows = sorted(
+        {(p["scene"], p["measure"], p["law"], integrator_of(p), p["precision"]) for p in points}
+    )
     out.append(
         "Error (relative; positions in m) against dt / stable_dt, nominal (- : not run; "
         "stopped: the run diverged before the comparison's end):\n"
     )
     out.append(
-        "| scene: measure | law | precision | " + " | ".join(f"{r:g}" for r in ratios) + " |"
+        "| scene: measure | law | integrator | precision | "
+        + " | ".join(f"{r:g}" for r in ratios)
+        + " |"
     )
-    out.append("|---|---|---|" + "---:|" * len(ratios))
-    for scene, measure, law, prec in rows:
+    out.append("|---|---|---|---|" + "---:|" * len(ratios))
+    for scene, measure, law, integ, prec in rows:
         by = {
             _nominal(p["ratio"]): p
             for p in points
-            if (p["scene"], p["measure"], p["law"], p["precision"]) == (scene, measure, law, prec)
+            if (p["scene"], p["measure"], p["law"], integrator_of(p), p["precision"])
+            == (scene, measure, law, integ, prec)
         }
         cells = []
         for r in ratios:
@@ -236,16 +272,21 @@ def tables(summary: dict[str, Any]) -> str:
             cells.append(
                 "-" if p is None else ("stopped" if p["error"] is None else _fmt(p["error"]))
             )
-        out.append(f"| {scene}: {measure} | {law} | {prec} | " + " | ".join(cells) + " |")
+        out.append(f"| {scene}: {measure} | {law} | {integ} | {prec} | " + " | ".join(cells) + " |")
     out.append("\nConvergence order (float64; scatter in decades; '(no)': not converging):\n")
-    out.append("| scene: measure | coulomb | rate-state |")
-    out.append("|---|---:|---:|")
+    columns = [
+        (law, integ)
+        for integ in summary["settings"].get("integrators", ["euler"])
+        for law in summary["settings"]["laws"]
+    ]
+    out.append("| scene: measure | " + " | ".join(label(*c) for c in columns) + " |")
+    out.append("|---|" + "---:|" * len(columns))
     orders = summary["orders"]
     for scene, ms in MEASURES.items():
         for m in ms:
             cells = []
-            for law in ("coulomb", "rate-state"):
-                fit = orders.get(f"{scene}: {m}/{law}/f64")
+            for law, integ in columns:
+                fit = orders.get(f"{scene}: {m}/{law}/{integ}/f64")
                 cells.append(
                     "-"
                     if not fit
@@ -257,16 +298,16 @@ def tables(summary: dict[str, Any]) -> str:
         "\nCost: wall time per step of one world alone (us), and per simulated second "
         "at dt = 0.2 stable_dt (s):\n"
     )
-    out.append("| scene | law | precision | us per step | s per simulated s at 0.2 |")
-    out.append("|---|---|---|---:|---:|")
+    out.append("| scene | law | integrator | precision | us per step | s per simulated s at 0.2 |")
+    out.append("|---|---|---|---|---:|---:|")
     stable = summary["settings"]["stable_dt"]
     for key, t in summary["timing"].items():
-        scene, law, prec = key.split("/")
+        scene, law, integ, prec = key.split("/")
         sdt = stable["collisions"] if scene == "collision" else stable["pillar, pushed box"]
         # A row without a run alone is a batch's wall per step, compiling included.
         batch = "" if t.get("alone", True) else " (batch, compiling included)"
         out.append(
-            f"| {scene} | {law} | {prec} | {t['wall_per_step_s'] * 1e6:.0f}{batch} | "
+            f"| {scene} | {law} | {integ} | {prec} | {t['wall_per_step_s'] * 1e6:.0f}{batch} | "
             f"{t['wall_per_step_s'] / (0.2 * sdt):.2f} |"
         )
     out.append("\nWhen two runs of the pillar scene part (a block 1 cm from its twin), s:\n")
@@ -274,24 +315,32 @@ def tables(summary: dict[str, Any]) -> str:
     out.append("|---|---|---|---:|---:|")
     for p in summary["pillar_parting_at_a_quarter_step"]:
         out.append(
-            f"| {p['ratio']:.2g} against {p['quarter']:.2g} stable_dt | {p['law']} | "
+            f"| {p['ratio']:.2g} against {p['quarter']:.2g} stable_dt | "
+            f"{label(p['law'], integrator_of(p))} | "
             f"{p['precision']} | {_fmt(p['parted_at'], '.1f')} | {p['until']:g} |"
         )
-    for law, c in summary["chaos"].items():
+    for v in summary.get("pillar_reference", {}).values():
+        a = v.get("against_euler")
+        if a:
+            out.append(
+                f"| the references (0.05 stable_dt), {v['integrator']} against euler | "
+                f"{v['law']} | f64 | {_fmt(a['parted_at'], '.1f')} | {a['until_s']:.3g} |"
+            )
+    for name, c in summary["chaos"].items():
         out.append(
-            f"| the last bit of one x, at {c['ratio']:.2g} stable_dt | {law} | f64 | "
+            f"| the last bit of one x, at {c['ratio']:.2g} stable_dt | {name} | f64 | "
             f"{_fmt(c['parted_at'], '.1f')} (1e-9 m at {_fmt(c['departed_at'], '.1f')}) "
             f"| {c['until']:g} |"
         )
-    stability = summary.get("stability")
-    if stability:
+    rows = _stability_rows(summary)
+    if rows:
         out.append(
             "\nThe largest dt / stable_dt each scene survives (bisection; the energy the "
             "bodies hold over what came in, at the last survivor):\n"
         )
-        out.append("| scene | survives | stops | held / in at the survivor |")
-        out.append("|---|---:|---:|---:|")
-        for name, res in stability.items():
+        out.append("| scene | integrator | survives | stops | held / in at the survivor |")
+        out.append("|---|---|---:|---:|---:|")
+        for integ, name, res in rows:
             lo = res["largest_surviving_ratio"]
             held = next(
                 (
@@ -302,12 +351,14 @@ def tables(summary: dict[str, Any]) -> str:
                 None,
             )
             out.append(
-                f"| {name} | {_fmt(lo, '.3f')} | {_fmt(res['smallest_failing_ratio'], '.3f')}"
-                f" | {_fmt(held, '.2f')} |"
+                f"| {name} | {integ} | {_fmt(lo, '.3f')} | "
+                f"{_fmt(res['smallest_failing_ratio'], '.3f')} | {_fmt(held, '.2f')} |"
             )
-    rec = summary.get("recommendation")
-    if rec:
-        out.append(f"\nRecommended `dt_safety`: **{rec['dt_safety']}** ({rec['rule']}).\n")
+    for integ, rec in summary.get("recommendation", {}).items():
+        out.append(
+            f"\nRecommended `dt_safety` with the {integ} integrator: **{rec['dt_safety']}** "
+            f"({rec['rule']}).\n"
+        )
         names = list(next(iter(rec["candidates"].values()))["errors"])
         out.append("| dt_safety | margin in the jam | " + " | ".join(names) + " |")
         out.append("|---:|---:|" + "---:|" * len(names))

@@ -68,15 +68,23 @@ def scene_of(name: str):
     raise ValueError(name)
 
 
-def trial(scene, ratio: float, until: float, sample: float) -> dict[str, Any]:
-    """One run at ``dt = ratio x stable_dt``: did it survive, and what did it create?"""
+def trial(
+    scene, ratio: float, until: float, sample: float, integrator: str = "euler"
+) -> dict[str, Any]:
+    """One run at ``dt = ratio x stable_dt`` with ``integrator``: did it survive, and what
+    did it create?"""
     from ...errors import TaichiIceError
     from ...run.budget import as_series, came_in, residual
     from ...run.simulation import Simulation
 
     dt = ratio * scene.stable_dt
     start = time.perf_counter()
-    sim = Simulation(dem_scenes.with_step(scene, dt, sample, frames=10), dt=dt, force_dt=True)
+    sim = Simulation(
+        dem_scenes.with_step(scene, dt, sample, frames=10),
+        dt=dt,
+        force_dt=True,
+        integrator=integrator,
+    )
     out: dict[str, Any] = {"ratio": sim.dt / scene.stable_dt, "dt": sim.dt}
     try:
         sim.run(until=until)
@@ -94,18 +102,18 @@ def trial(scene, ratio: float, until: float, sample: float) -> dict[str, Any]:
     return out
 
 
-def find_limit(name: str, log=print) -> dict[str, Any]:
-    """Bisect the largest surviving ``dt / stable_dt`` of one scene."""
+def find_limit(name: str, log=print, integrator: str = "euler") -> dict[str, Any]:
+    """Bisect the largest surviving ``dt / stable_dt`` of one scene with ``integrator``."""
     scene = scene_of(name)
     until, sample = SCENES[name]["until"], SCENES[name]["sample"]
     trials: list[dict[str, Any]] = []
 
     def run(ratio: float) -> bool:
-        t = trial(scene, ratio, until, sample)
+        t = trial(scene, ratio, until, sample, integrator)
         trials.append(t)
         state = "survived" if t["survived"] else f"failed at t = {t['failed_at']:.3g} s"
         log(
-            f"dem stability: {name:14s} dt = {t['ratio']:.3f} x stable_dt: {state} "
+            f"dem stability [{integrator}]: {name:14s} dt = {t['ratio']:.3f} x stable_dt: {state} "
             f"[{t['wall_s']:.1f} s]"
         )
         return t["survived"]
@@ -142,6 +150,7 @@ def find_limit(name: str, log=print) -> dict[str, Any]:
     )
     return {
         "scene": name,
+        "integrator": integrator,
         "until_s": until,
         "stable_dt": scene.stable_dt,
         "largest_surviving_ratio": lo,
@@ -151,9 +160,9 @@ def find_limit(name: str, log=print) -> dict[str, Any]:
     }
 
 
-def run_all(log=print) -> dict[str, Any]:
-    """The limit of every scene (Taichi must run, float64)."""
-    return {name: find_limit(name, log=log) for name in SCENES}
+def run_all(log=print, integrator: str = "euler") -> dict[str, Any]:
+    """The limit of every scene with ``integrator`` (Taichi must run, float64)."""
+    return {name: find_limit(name, log=log, integrator=integrator) for name in SCENES}
 
 
 def recommend(limits: dict[str, Any], error_at: dict[str, Any], accuracy: dict[str, float]):

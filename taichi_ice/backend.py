@@ -34,6 +34,7 @@ PRECISIONS = ("f64", "f32")
 _current: tuple[str, str] | None = None
 # The arch Taichi actually runs on ("cpu", "cuda", "vulkan", "metal"), read back after start.
 _actual: str | None = None
+_generation = 0  # Taichi starts in this process (``generation``)
 # Taichi's names of CPU archs: a GPU arch that fell back runs on one of these.
 _CPU_ARCHES = ("x64", "arm64", "cpu")
 # Seconds a child process may take to start Taichi on a GPU arch (import + driver start).
@@ -324,7 +325,7 @@ def init(
         ValueError: unknown arch or precision, or a different arch/precision than the
             running one without ``reinit``.
     """
-    global _current, _actual, _int_atomics_ok, _loops_ok
+    global _current, _actual, _int_atomics_ok, _loops_ok, _generation
     if arch not in ARCHES:
         raise ValueError(f"arch must be one of {ARCHES}, got {arch!r}")
     real_dtype(precision)
@@ -371,6 +372,7 @@ def init(
             fast_math=False,
         )
     _current = wanted
+    _generation += 1
     _actual = _running_arch()
     spirv = _actual in SPIRV_ARCHES
     _int_atomics_ok = _integer_atomics_in_loops_work() if spirv else True
@@ -403,6 +405,12 @@ def _quiet_start():
 def _taichi_messages_wanted() -> bool:
     """True when ENABLE_TAICHI_HEADER_PRINT is set and not false, read as Taichi reads it."""
     return os.environ.get("ENABLE_TAICHI_HEADER_PRINT", "0").lower() not in ("false", "0", "f")
+
+
+def generation() -> int:
+    """How many times this process has started Taichi: the fields (and Worlds) of an
+    earlier start are freed (``init(..., reinit=True)``)."""
+    return _generation
 
 
 def current() -> tuple[str, str] | None:

@@ -59,6 +59,8 @@ class Batch:
         layout: sizes and compile-time switches (``schema.Layout``).
         host: the arrays of every ``HOST`` field (``schema.HostArrays``).
         dt: the time step (s). stable_dt: the contact stability limit (s), over every world.
+        default_slots: the contact slots per body these scenes get when none are asked for
+            (``layout.slots`` unless ``Options.slots`` set them).
     """
 
     scenes: tuple
@@ -66,6 +68,7 @@ class Batch:
     host: HostArrays
     dt: float
     stable_dt: float
+    default_slots: int
 
     def world_slices(self) -> list[slice]:
         """Body index range of each world."""
@@ -114,11 +117,8 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     arrays.update(_worlds(scenes, coulomb))
     methods = {s.friction.method for s in scenes if hasattr(s.friction, "method")}
     large_per_world = sizes.pop("large_per_world")
-    slots = (
-        options.slots
-        if options.slots is not None
-        else DEFAULT_SMALL_SLOTS + min(int(large_per_world), LARGE_SLOTS)
-    )
+    default_slots = DEFAULT_SMALL_SLOTS + min(int(large_per_world), LARGE_SLOTS)
+    slots = options.slots if options.slots is not None else default_slots
     cell_size = sizes.pop("cell_size")
     skin = SKIN_FRACTION * cell_size
     arrays.update(_contact_values(scenes))
@@ -146,7 +146,7 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     if not layout.water:
         arrays.pop("body_drag_linear")
         arrays.pop("body_drag_rotational")
-    return Batch(scenes, layout, HostArrays(layout, arrays), dt, stable_dt)
+    return Batch(scenes, layout, HostArrays(layout, arrays), dt, stable_dt, default_slots)
 
 
 def hash_size_for(n_small: int) -> int:

@@ -96,15 +96,16 @@ class Simulation:
             above the stability limit unless ``force_dt``; it is shortened to a whole number
             of steps per sample and frame (``dt_note`` says so).
         **changes: options by name, for short (``Simulation(scene, dt=1e-4, arch="gpu")``).
-        worlds: what makes the World, called with the scenes and the Options; default ``World``
-            (a new World, its kernels compiled anew). A sweep passes one that reloads a
-            World already compiled for the same layout (``pool.WorldPool``).
+        worlds: what makes the World, called with the scenes and the Options; default: this
+            process's ``pool.POOL`` hands out a World of the same layout that no one uses
+            any more (no Simulation, no name holds it), reloaded (nothing compiles again),
+            or builds one. A sweep passes one that leases from the pool (``POOL.lease()``).
     """
 
     def __init__(
         self, scene, friction=None, options: Options | None = None, *, worlds=None, **changes
     ):
-        from ..engine.world import World
+        from ..engine.pool import POOL
         from ..limits import check_size
         from ..scene.model import Scene
 
@@ -168,7 +169,10 @@ class Simulation:
                 f"dt {requested:.4g} s shortened to {self.dt:.4g} s: a whole number of steps "
                 f"per sample ({first.series_interval:g} s) and frame ({first.output_interval:g} s)"
             )
-        self.world = (worlds or World)(scenes, options.replace(dt=self.dt))
+        if worlds is None:
+            self.world = POOL.take(scenes, options.replace(dt=self.dt), owner=self)
+        else:
+            self.world = worlds(scenes, options.replace(dt=self.dt))
         # Said, never silent either: a step forced above the stability limit.
         self.forced_note = ""
         if self.dt > self.world.stable_dt:

@@ -80,3 +80,95 @@ def test_a_world_reloaded_at_another_dt_steps_as_one_built_for_it():
     coarse = World([scene])
     coarse.advance(400)
     assert not np.array_equal(coarse.positions(), fresh.positions())
+
+
+@pytest.fixture
+def pool(monkeypatch):
+    """A pool of this test's own, as ``Simulation`` finds it (``pool.POOL``)."""
+    from taichi_ice.engine import pool as pool_module
+
+    mine = pool_module.WorldPool()
+    monkeypatch.setattr(pool_module, "POOL", mine)
+    return mine
+
+
+def test_a_simulation_reuses_a_world_no_one_holds_and_steps_as_a_new_one(pool):
+    """A Simulation takes its World from the process's pool: once the first Simulation is
+    gone its World is reloaded for the next scenes of that layout (built once, reloaded
+    once), and the run is, field for field, that of a World built for it, here with the
+    analytic step and a rate-and-state contact (contact memory, the remembered contact
+    force) after another run left the World's fields full."""
+    from taichi_ice.engine.world import World
+    from taichi_ice.experiments.validation import dem_scenes
+    from taichi_ice.run.simulation import Simulation
+
+    # The face-on collision first (the same layout: the law's kind is compiled in).
+    sim = Simulation(dem_scenes.collision(0.0, "rate-state"), integrator="analytic")
+    sim.run(until=0.01)
+    first = sim.world
+    del sim
+    assert pool.idle() == 0  # still held, by `first`
+    del first
+    assert (pool.built, pool.reloaded, pool.idle()) == (1, 0, 1)
+
+    scene = dem_scenes.collision(dem_scenes.OFFSET, "rate-state")
+    reused = Simulation(scene, integrator="analytic")
+    assert (pool.built, pool.reloaded) == (1, 1)
+    fresh = Simulation(scene, integrator="analytic", worlds=World)
+    for until in (0.002, 0.01):  # in the contact (touching at t = 0, 4.9 ms), and after
+        for s in (reused, fresh):
+            s.run(until=until)
+        got, expected = _fields(reused.world), _fields(fresh.world)
+        for name in expected:
+            assert np.array_equal(got[name], expected[name]), (until, name)
+        if until < 0.005:
+            assert np.any(got["contact_force"] != 0.0)  # the contact was met
+
+
+def test_a_world_still_held_is_never_handed_out(pool):
+    """A World that a live Simulation or a name still holds stays as it is: the next
+    Simulation of its layout builds its own."""
+    from taichi_ice.run.simulation import Simulation
+
+    scene = load_scenario("two_squares")
+    first = Simulation(scene)
+    first.run(until=0.02)
+    kept = first.positions(0).copy()
+    world = first.world
+    del first
+    second = Simulation(scene)
+    assert second.world is not world and (pool.built, pool.reloaded) == (2, 0)
+    second.run(until=0.05)
+    assert np.array_equal(world.positions()[: len(kept)], kept)
+
+
+def test_a_world_with_other_slots_than_a_new_one_is_not_reused(pool):
+    """A Simulation that asks for no slots gets the scenes' default, as a new World would: an
+    idle World built with other slots is passed over (a reused one could stop for want of
+    slots where a new one runs)."""
+    from taichi_ice.engine.assemble import assemble
+    from taichi_ice.run.simulation import Simulation
+
+    scene = load_scenario("two_squares")
+    default = assemble([scene]).layout.slots
+    Simulation(scene, slots=default + 1)
+    assert pool.idle() == 1
+    sim = Simulation(scene)
+    assert sim.world.layout.slots == default and (pool.built, pool.reloaded) == (2, 0)
+    del sim
+    again = Simulation(scene)
+    assert again.world.layout.slots == default and (pool.built, pool.reloaded) == (2, 1)
+
+
+def test_worlds_of_an_earlier_taichi_start_are_dropped(pool, monkeypatch):
+    """``backend.init(..., reinit=True)`` frees every field: the pool forgets the Worlds of
+    an earlier start instead of handing one out."""
+    from taichi_ice import backend
+    from taichi_ice.run.simulation import Simulation
+
+    scene = load_scenario("two_squares")
+    Simulation(scene)
+    assert len(pool) == 1 and pool.idle() == 1
+    monkeypatch.setattr(backend, "generation", lambda: -1)
+    Simulation(scene)
+    assert len(pool) == 1 and (pool.built, pool.reloaded) == (2, 0)

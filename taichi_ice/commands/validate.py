@@ -21,6 +21,7 @@ STUDIES = (
     "single_interface",
     "dem_contact",
     "dem_accuracy",
+    "dem_ensemble",
     "contact_convergence",
     "speed_accuracy",
 )
@@ -30,6 +31,7 @@ QUICK = {
     "single_interface": "coarser steps",
     "dem_contact": "coarser steps",
     "dem_accuracy": "small sizes (tests)",
+    "dem_ensemble": "two layouts, 3 s, Euler only",
     "contact_convergence": "fewer steps and layouts",
     "speed_accuracy": "fewer steps, 1e4 interfaces",
 }

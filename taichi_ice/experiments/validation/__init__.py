@@ -15,7 +15,10 @@
   to beyond the stability limit, float64 and float32, Coulomb and rate-and-state (collisions
   against an ODE, the pushed box's energy budget, the pillar scene against a run at a quarter
   of the step, when chaotic runs part), and the largest step each scene survives
-  (``dem_stability``), with the recommended ``dt_safety``.
+  (``dem_stability``), with the recommended ``dt_safety``; each with both integrators.
+- ``dem_ensemble`` (``--dem``): the pillar scene over 32 layouts at 4x the default step and
+  with the analytic step, against the default on the same layouts: each measure's shift
+  against its sampling error (paired t interval, Wilcoxon, KS; released: McNemar).
 - ``contact_convergence`` (``--dem``): friction at a DEM contact against dt: a driven
   slider's frictional work and slip starts, a block that slid holding or sliding under a
   pull, steady sliding on a moving floor against mu_ss, every law in the pillar scene before
@@ -57,9 +60,10 @@ def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bo
 
         speed_accuracy.run(out_dir, quick=quick)
     if dem:
-        from . import contact_convergence, dem_accuracy
+        from . import contact_convergence, dem_accuracy, dem_ensemble
 
         dem_accuracy.run(out_dir, quick=quick)
+        dem_ensemble.run(out_dir, quick=quick)
         contact_convergence.run(out_dir, quick=quick)
     print(f"validate: done in {time.perf_counter() - start:.1f} s; results in {out_dir}/")
     return 0

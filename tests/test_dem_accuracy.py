@@ -221,3 +221,50 @@ def test_validate_refuses_an_unknown_integrator_in_one_line(capsys):
     err = capsys.readouterr().err
     assert "unknown integrator(s) verlet" in err and "euler, analytic" in err
     assert "Traceback" not in err
+
+
+def test_the_step_shift_is_held_against_the_sampling_error_in_closed_form():
+    """``dem_ensemble.paired`` on four layouts whose values shift by 1, 2, 3, 4: mean 2.5,
+    its 95 % t interval 2.5 -+ t(0.975, 3) 1.2910 / 2 (t = 3.18245, from tables), the
+    baseline mean's standard error 2.5820 / 2, within 1.96 of them; the exact Wilcoxon p of
+    four positive differences 2 / 2^4. ``mcnemar``: 5 released only in the baseline and none
+    only in the other, p = 2 / 2^5; as many each way, p = 1."""
+    from taichi_ice.experiments.validation import dem_ensemble
+
+    base = [10.0, 12.0, 14.0, 16.0]
+    got = dem_ensemble.paired(base, [11.0, 14.0, 17.0, 20.0])
+    half = 3.182446305 * 1.2909944487 / 2.0
+    assert got["shift"] == pytest.approx(2.5)
+    assert got["shift_ci95"] == pytest.approx([2.5 - half, 2.5 + half], rel=1e-8)
+    assert got["base_se"] == pytest.approx(2.5819888975 / 2.0, rel=1e-9)
+    assert got["shift_rel"] == pytest.approx(2.5 / 13.0)
+    assert got["within_sampling_error"] is True  # 2.5 <= 1.96 x 1.291 = 2.53
+    assert got["wilcoxon_p"] == pytest.approx(0.125)
+    assert 0.0 < got["ks_p"] <= 1.0
+    assert dem_ensemble.paired(base, [13.0, 15.0, 17.0, 19.0])["within_sampling_error"] is False
+    # A layout whose value is not finite is left out of both.
+    assert dem_ensemble.paired([1.0, float("nan"), 3.0], [1.0, 2.0, 3.0])["n"] == 2
+
+    released = dem_ensemble.mcnemar([1] * 5 + [0] * 3, [0] * 8)
+    assert (released["only_base"], released["only_other"]) == (5, 0)
+    assert released["p"] == pytest.approx(2.0 / 2**5)
+    assert dem_ensemble.mcnemar([1, 0, 1, 0], [0, 1, 0, 1])["p"] == pytest.approx(1.0)
+
+
+def test_quick_ensemble_runs_and_compares_on_the_same_layouts(tmp_path):
+    """``dem_ensemble --quick``: two layouts of the pillar scene at 0.2 and 0.8 stable_dt
+    until the rubble has met the pillar; its files, every layout's measures, and the
+    comparison's verdict."""
+    from taichi_ice.experiments.validation import dem_ensemble
+
+    summary = dem_ensemble.run(tmp_path, quick=True, log=lambda _: None)
+    assert (tmp_path / "dem_ensemble.png").stat().st_size > 0
+    on_disk = json.loads((tmp_path / "dem_ensemble.json").read_text())
+    runs = on_disk["runs"]
+    ((key, c),) = on_disk["comparisons"].items()
+    assert len(runs) == 2 and all(r["status"] == "complete" for r in runs)
+    assert runs[0]["seeds"] == runs[1]["seeds"] and len(runs[0]["seeds"]) == 2
+    assert all(min(r["peak_force"]) > 0 for r in runs)  # the rubble met the pillar
+    assert key == "coulomb: euler 0.8 against euler 0.2"
+    assert c["peak_force"]["n"] == 2 and isinstance(c["all_within"], bool)
+    assert summary["comparisons"][key]["all_within"] == c["all_within"]

@@ -65,6 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
                 help="integrators compared, comma-separated, e.g. 'euler' or 'euler,analytic' "
                 "(default: both; --quick: euler)",
             )
+        if name == "dem_ensemble":
+            p.add_argument(
+                "--reuse",
+                action="store_true",
+                help="keep the cases already in --out/dem_ensemble.json, run only the others",
+            )
         if name == "speed_accuracy":
             p.add_argument("--arch", default="cpu", help="Taichi arch (cpu or gpu)")
             p.add_argument("--interfaces", type=int, default=None, help="interfaces timed")
@@ -102,6 +108,8 @@ def main(argv: list[str] | None = None) -> int:
                 reuse=args.reuse,
                 integrators=args.integrators,
             )
+    elif args.study == "dem_ensemble":
+        study.run(args.out, quick=args.quick, reuse=args.reuse)
     elif args.study == "speed_accuracy":
         if args.worker:
             n = args.interfaces or (study.QUICK_N_INTERFACES if args.quick else study.N_INTERFACES)

@@ -49,16 +49,18 @@ CONVERGING_SCATTER = 0.15
 # The recommended dt_safety keeps these errors (float64, at dt = dt_safety x stable_dt,
 # interpolated on the ladder; the largest over both laws) within:
 # A contact's energy loss (restitution) and duration are what the contact model is built to
-# give; the pillar force is the paper's measure; the budget must close (DESIGN: "up to a
-# residual that shrinks with dt"). Keys: "scene: measure" (the largest error over both laws)
-# or "scene: measure/law". The rate-and-state pillar measures are left out: they do not
-# converge over these steps (see the orders), so no step meets a bound on them reliably.
+# give; the pillar force and frictional energy are the paper's measures; the budget must
+# close (DESIGN: "up to a residual that shrinks with dt"). Keys: "scene: measure" (the
+# largest error over both laws) or "scene: measure/law". (Until issue 30 the rate-and-state
+# pillar measures were left out: before issue 26 they did not converge; now they do, at
+# order 0.85 and 2.4 with the Euler step.)
 ACCURACY = {
     "face-on collision: restitution": 0.02,
     "face-on collision: duration": 0.02,
     "offset collision: spin": 0.05,
     "pushed box: budget residual": 0.01,
-    "pillar: peak force/coulomb": 0.02,
+    "pillar: peak force": 0.02,
+    "pillar: friction energy": 0.02,
 }
 MEASURES = {
     "face-on collision": ("restitution", "duration"),

@@ -134,7 +134,7 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
         "DEM accuracy against cost (labels: dt / stable_dt). Collisions against the ODE of the "
         "contact law; pushed box: energy budget residual;\npillar scene: against dt = 0.05 "
         "stable_dt (a quarter of the default step) of the same integrator, until the default "
-        f"step's run parts ({windows})",
+        f"step's run parts:\n{windows}",
         fontsize=11,
     )
     fig.savefig(path, dpi=75)

@@ -7,7 +7,9 @@ what the paper's question rests on is that draw's distribution over layouts. Her
 ``LAYOUTS`` layouts of the pillar scene (the paper's and reseeded ones, as the study's), with
 Coulomb friction (mu = 0.5) and the paper's rate-and-state law, the paper's 20 s at each
 (integrator, dt / stable_dt) of ``CASES``, the measures of ``experiments.metrics``, held
-against the ``BASELINE`` (Euler at the default step) on the same layouts:
+against each other on the same layouts (``COMPARISONS``: 4x the default step and the
+analytic step against the default, the default against a quarter of its step, and the two
+integrators at that quarter):
 
 - **the step's shift**: the mean of the paired differences (same layout), with its 95 %
   t interval, relative to the baseline's mean;
@@ -36,13 +38,35 @@ LAYOUTS = 32
 UNTIL = 20.0  # s: the paper's run
 LAWS = ("coulomb", "rate-state")
 BASELINE = ("euler", 0.2)  # the default integrator at the default step
-# (integrator, dt / stable_dt): 4x the default step with each integrator, and the analytic
-# step at the default one.
-CASES = (BASELINE, ("euler", 0.8), ("analytic", 0.2), ("analytic", 0.8))
+REFERENCE = ("euler", 0.05)  # a quarter of it
+# (integrator, dt / stable_dt): 4x the default step with each integrator, the analytic step
+# at the default one, and both at a quarter of it.
+CASES = (
+    BASELINE,
+    ("euler", 0.8),
+    ("analytic", 0.2),
+    ("analytic", 0.8),
+    REFERENCE,
+    ("analytic", 0.05),
+)
+# (case, against): what each comparison holds against what.
+COMPARISONS = (
+    (("euler", 0.8), BASELINE),
+    (("analytic", 0.2), BASELINE),
+    (("analytic", 0.8), BASELINE),
+    (BASELINE, REFERENCE),
+    (("analytic", 0.05), REFERENCE),
+)
 MEASURES = ("peak_force", "friction_energy", "concentration")
 WITHIN = 1.96  # standard errors of the baseline's mean
 # Quick: the rubble meets the pillar at 2.1 s.
-QUICK = {"layouts": 2, "until": 3.0, "laws": ("coulomb",), "cases": (BASELINE, ("euler", 0.8))}
+QUICK = {
+    "layouts": 2,
+    "until": 3.0,
+    "laws": ("coulomb",),
+    "cases": (BASELINE, ("euler", 0.8)),
+    "comparisons": ((("euler", 0.8), BASELINE),),
+}
 
 
 def paired(base, other) -> dict[str, Any]:
@@ -60,6 +84,8 @@ def paired(base, other) -> dict[str, Any]:
     keep = np.isfinite(a) & np.isfinite(b)
     a, b = a[keep], b[keep]
     n = a.size
+    if n == 0:
+        return {"n": 0, "within_sampling_error": None}
     d = b - a
     shift = float(d.mean())
     half = float(stats.t.ppf(0.975, n - 1) * d.std(ddof=1) / math.sqrt(n)) if n > 1 else math.nan
@@ -119,34 +145,46 @@ def run_case(law: str, integrator: str, ratio: float, layouts: int, until: float
         options=Options(dt=dt, force_dt=True, integrator=integrator),
     )
     values = {m: [float(x[m]) for x in ens.metrics] for m in (*MEASURES, "released")}
+    # A batch stops whole when one of its worlds diverges: its measures are then of a
+    # shorter run, and no layout of it is compared.
+    completed = [ens.status == "complete"] * len(ens.seeds)
     return {
         "law": law,
         "integrator": integrator,
         "ratio": dt / scene.stable_dt,
         "dt": dt,
         "status": ens.status,
+        "failure": ens.failure,
+        "completed": completed,
         "seeds": list(ens.seeds),
         "wall_s": time.perf_counter() - start,
         **values,
     }
 
 
-def compare(runs: list[dict], laws, cases) -> dict[str, Any]:
-    """Every case against the baseline, per law and measure."""
+def compare(runs: list[dict], laws, comparisons) -> dict[str, Any]:
+    """Each (case, against) of ``comparisons``, per law and measure, on the layouts both
+    ran to the end (those of a batch that stopped are left out of both, and counted)."""
     out: dict[str, Any] = {}
     for law in laws:
         mine = {(r["integrator"], round(r["nominal"], 6)): r for r in runs if r["law"] == law}
-        base = mine[(BASELINE[0], BASELINE[1])]
-        for integ, ratio in cases:
-            if (integ, ratio) == BASELINE:
-                continue
+        for (integ, ratio), (base_integ, base_ratio) in comparisons:
             other = mine[(integ, round(ratio, 6))]
-            entry = {m: paired(base[m], other[m]) for m in MEASURES}
-            entry["released"] = mcnemar(base["released"], other["released"])
-            entry["all_within"] = all(entry[m]["within_sampling_error"] for m in MEASURES) and (
-                entry["released"]["p"] > 0.05
+            base = mine[(base_integ, round(base_ratio, 6))]
+            ok = np.asarray(base["completed"]) & np.asarray(other["completed"])
+            entry: dict[str, Any] = {
+                m: paired(np.asarray(base[m])[ok], np.asarray(other[m])[ok]) for m in MEASURES
+            }
+            entry["released"] = mcnemar(
+                np.asarray(base["released"])[ok], np.asarray(other["released"])[ok]
             )
-            out[f"{law}: {integ} {ratio:g} against {BASELINE[0]} {BASELINE[1]:g}"] = entry
+            entry["left_out"] = int((~ok).sum())
+            entry["all_within"] = bool(
+                all(entry[m]["within_sampling_error"] for m in MEASURES)
+                and entry["released"]["p"] > 0.05
+            )
+            key = f"{law}: {integ} {ratio:g} against {base_integ} {base_ratio:g}"
+            out[key] = entry
     return out
 
 
@@ -170,7 +208,7 @@ def plot(summary: dict[str, Any], path: Path) -> None:
                 color = "C0" if r["integrator"] == "euler" else "C2"
                 ax.plot(np.full(v.size, k) + 0.08, v, ".", color=color, alpha=0.3, ms=4)
                 ax.errorbar(k - 0.08, v.mean(), yerr=half, fmt="o", color=color, capsize=3)
-                if (r["integrator"], round(r["nominal"], 6)) == BASELINE:
+                if (r["integrator"], r["nominal"]) == BASELINE:
                     ax.axhspan(v.mean() - half, v.mean() + half, color="0.85", zorder=0)
             ax.set_xticks(range(len(runs)))
             ax.set_xticklabels(labels[: len(runs)], fontsize=7)
@@ -185,27 +223,52 @@ def plot(summary: dict[str, Any], path: Path) -> None:
     fig.savefig(path, dpi=75)
 
 
-def run(out_dir: str | Path, quick: bool = False, log=print) -> dict[str, Any]:
-    """Every case of every law, the comparisons, ``dem_ensemble.json`` and ``.png``."""
+def run(out_dir: str | Path, quick: bool = False, reuse: bool = False, log=print) -> dict[str, Any]:
+    """Every case of every law, the comparisons, ``dem_ensemble.json`` and ``.png``.
+
+    ``reuse``: keep the runs of an earlier ``dem_ensemble.json`` in ``out_dir`` made with the
+    same layouts and length, and run only the cases it lacks.
+    """
     from ... import backend
 
     if backend.current() is None:
         backend.init("cpu", "f64")
     cfg = (
-        dict(QUICK) if quick else {"layouts": LAYOUTS, "until": UNTIL, "laws": LAWS, "cases": CASES}
+        dict(QUICK)
+        if quick
+        else {
+            "layouts": LAYOUTS,
+            "until": UNTIL,
+            "laws": LAWS,
+            "cases": CASES,
+            "comparisons": COMPARISONS,
+        }
     )
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "dem_ensemble.json"
     start = time.perf_counter()
+    kept = {}
+    if reuse and path.is_file():
+        old = json.loads(path.read_text())
+        same = (old["settings"]["layouts"], old["settings"]["until_s"]) == (
+            cfg["layouts"],
+            cfg["until"],
+        )
+        if same:
+            kept = {(r["law"], r["integrator"], round(r["nominal"], 6)): r for r in old["runs"]}
     runs = []
     for law in cfg["laws"]:
         for integ, ratio in cfg["cases"]:
-            r = run_case(law, integ, ratio, cfg["layouts"], cfg["until"])
-            r["nominal"] = ratio
+            r = kept.get((law, integ, round(ratio, 6)))
+            if r is None:
+                r = run_case(law, integ, ratio, cfg["layouts"], cfg["until"])
+                r["nominal"] = ratio
             runs.append(r)
             log(
                 f"dem ensemble: {law}, {integ} at {ratio:g} stable_dt, {cfg['layouts']} layouts "
                 f"to {cfg['until']:g} s: {r['status']} [{r['wall_s']:.1f} s]"
+                + (f" ({r['failure']})" if r.get("failure") else "")
             )
     summary = {
         "settings": {
@@ -213,14 +276,17 @@ def run(out_dir: str | Path, quick: bool = False, log=print) -> dict[str, Any]:
             "until_s": cfg["until"],
             "laws": list(cfg["laws"]),
             "cases": [list(c) for c in cfg["cases"]],
-            "baseline": list(BASELINE),
-            "within": f"|mean paired shift| <= {WITHIN} standard errors of the baseline's mean",
+            "comparisons": [[list(a), list(b)] for a, b in cfg["comparisons"]],
+            "within": f"|mean paired shift| <= {WITHIN} standard errors of the other's mean",
         },
         "runs": runs,
-        "comparisons": compare(runs, cfg["laws"], cfg["cases"]),
+        "comparisons": compare(runs, cfg["laws"], cfg["comparisons"]),
     }
     summary["wall_s"] = time.perf_counter() - start
     for key, c in summary["comparisons"].items():
+        if not c["peak_force"]["n"]:
+            log(f"dem ensemble: {key}: no layout to compare (a batch stopped)")
+            continue
         shifts = ", ".join(
             f"{m} {c[m]['shift_rel'] * 100:+.1f} % (se {c[m]['base_se_rel'] * 100:.1f} %)"
             for m in MEASURES
@@ -231,7 +297,6 @@ def run(out_dir: str | Path, quick: bool = False, log=print) -> dict[str, Any]:
             f"(McNemar p {rel['p']:.2g}); {'within' if c['all_within'] else 'NOT within'} the "
             "sampling error"
         )
-    path = out_dir / "dem_ensemble.json"
     path.write_text(json.dumps(summary, indent=1) + "\n")
     plot(summary, out_dir / "dem_ensemble.png")
     log(f"dem ensemble: wrote {path} and dem_ensemble.png [{summary['wall_s']:.0f} s]")

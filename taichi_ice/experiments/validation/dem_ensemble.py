@@ -162,6 +162,15 @@ def run_case(law: str, integrator: str, ratio: float, layouts: int, until: float
     }
 
 
+def _completed(run: dict) -> np.ndarray:
+    """Which layouts of a case ran to the end (a run from before ``completed`` was kept:
+    all of them if the batch did)."""
+    done = run.get("completed")
+    if done is None:
+        done = [run["status"] == "complete"] * len(run["seeds"])
+    return np.asarray(done, dtype=bool)
+
+
 def compare(runs: list[dict], laws, comparisons) -> dict[str, Any]:
     """Each (case, against) of ``comparisons``, per law and measure, on the layouts both
     ran to the end (those of a batch that stopped are left out of both, and counted)."""
@@ -171,7 +180,7 @@ def compare(runs: list[dict], laws, comparisons) -> dict[str, Any]:
         for (integ, ratio), (base_integ, base_ratio) in comparisons:
             other = mine[(integ, round(ratio, 6))]
             base = mine[(base_integ, round(base_ratio, 6))]
-            ok = np.asarray(base["completed"]) & np.asarray(other["completed"])
+            ok = _completed(base) & _completed(other)
             entry: dict[str, Any] = {
                 m: paired(np.asarray(base[m])[ok], np.asarray(other[m])[ok]) for m in MEASURES
             }

@@ -226,9 +226,11 @@ def test_validate_refuses_an_unknown_integrator_in_one_line(capsys):
 def test_the_step_shift_is_held_against_the_sampling_error_in_closed_form():
     """``dem_ensemble.paired`` on four layouts whose values shift by 1, 2, 3, 4: mean 2.5,
     its 95 % t interval 2.5 -+ t(0.975, 3) 1.2910 / 2 (t = 3.18245, from tables), the
-    baseline mean's standard error 2.5820 / 2, within 1.96 of them; the exact Wilcoxon p of
-    four positive differences 2 / 2^4. ``mcnemar``: 5 released only in the baseline and none
-    only in the other, p = 2 / 2^5; as many each way, p = 1."""
+    baseline mean's standard error 2.5820 / 2; the exact Wilcoxon p of four positive
+    differences 2 / 2^4. ``holm``: p = 0.01, 0.04, 0.03 of three tests adjust to 0.03, 0.06,
+    0.06 (3 x 0.01, then max(0.03, 2 x 0.03), then max(0.06, 1 x 0.04)). ``mcnemar``: 5
+    released only in the baseline and none only in the other, p = 2 / 2^5; as many each
+    way, p = 1."""
     from taichi_ice.experiments.validation import dem_ensemble
 
     base = [10.0, 12.0, 14.0, 16.0]
@@ -238,12 +240,16 @@ def test_the_step_shift_is_held_against_the_sampling_error_in_closed_form():
     assert got["shift_ci95"] == pytest.approx([2.5 - half, 2.5 + half], rel=1e-8)
     assert got["base_se"] == pytest.approx(2.5819888975 / 2.0, rel=1e-9)
     assert got["shift_rel"] == pytest.approx(2.5 / 13.0)
-    assert got["within_sampling_error"] is True  # 2.5 <= 1.96 x 1.291 = 2.53
+    assert got["within_sampling_error"] is False  # the interval [0.45, 4.55] misses 0
     assert got["wilcoxon_p"] == pytest.approx(0.125)
     assert 0.0 < got["ks_p"] <= 1.0
-    assert dem_ensemble.paired(base, [13.0, 15.0, 17.0, 19.0])["within_sampling_error"] is False
+    # Shifts of +3, -1, +1, -3 (mean 0): the interval holds 0.
+    assert dem_ensemble.paired(base, [13.0, 11.0, 15.0, 13.0])["within_sampling_error"] is True
     # A layout whose value is not finite is left out of both.
     assert dem_ensemble.paired([1.0, float("nan"), 3.0], [1.0, 2.0, 3.0])["n"] == 2
+
+    assert dem_ensemble.holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    assert dem_ensemble.holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])
 
     released = dem_ensemble.mcnemar([1] * 5 + [0] * 3, [0] * 8)
     assert (released["only_base"], released["only_other"]) == (5, 0)
@@ -266,5 +272,5 @@ def test_quick_ensemble_runs_and_compares_on_the_same_layouts(tmp_path):
     assert runs[0]["seeds"] == runs[1]["seeds"] and len(runs[0]["seeds"]) == 2
     assert all(min(r["peak_force"]) > 0 for r in runs)  # the rubble met the pillar
     assert key == "coulomb: euler 0.8 against euler 0.2"
-    assert c["peak_force"]["n"] == 2 and isinstance(c["all_within"], bool)
-    assert summary["comparisons"][key]["all_within"] == c["all_within"]
+    assert c["peak_force"]["n"] == 2 and isinstance(c["any_differs"], bool)
+    assert summary["comparisons"][key]["any_differs"] == c["any_differs"]

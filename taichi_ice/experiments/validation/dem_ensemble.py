@@ -12,12 +12,17 @@ analytic step against the default, the default against a quarter of its step, an
 integrators at that quarter):
 
 - **the step's shift**: the mean of the paired differences (same layout), with its 95 %
-  t interval, relative to the baseline's mean;
-- **the sampling error**: the standard error of the baseline's mean over the layouts;
-  the step "matches within the sampling error" where ``|shift| <= 1.96 x`` that;
-- the paired Wilcoxon signed-rank test and the two-sample Kolmogorov-Smirnov test of the
-  two distributions (SciPy);
-- ``released`` (0 or 1): the counts and the exact McNemar test on the discordant pairs.
+  t interval, relative to the other's mean; the shift is "within the sampling error" where
+  that interval holds 0 (past ~12 s the runs of one layout at two steps are as good as
+  independent draws, so the interval is about sqrt(2) x 1.96 standard errors of one mean);
+- **the sampling error**: the standard error of the other's mean over the layouts;
+- the paired Wilcoxon signed-rank test (and, of the two distributions, the two-sample
+  Kolmogorov-Smirnov test), SciPy; ``released`` (0 or 1): the counts and the exact McNemar
+  test on the discordant pairs;
+- **Holm's correction** over every test of the run (each comparison's measures and its
+  released): a shift "differs" where its Wilcoxon (or McNemar) p, so adjusted, is below 0.05.
+  With five comparisons of four measures for two laws, one uncorrected p below 0.05 is
+  expected by chance alone.
 
 Writes ``dem_ensemble.json`` (every layout's measures, per case and law, and the
 comparisons) and ``dem_ensemble.png``. ``python -m taichi_ice.commands.validate dem_ensemble``
@@ -58,7 +63,7 @@ COMPARISONS = (
     (("analytic", 0.05), REFERENCE),
 )
 MEASURES = ("peak_force", "friction_energy", "concentration")
-WITHIN = 1.96  # standard errors of the baseline's mean
+ALPHA = 0.05  # family-wise, Holm
 # Quick: the rubble meets the pillar at 2.1 s.
 QUICK = {
     "layouts": 2,
@@ -73,10 +78,10 @@ def paired(base, other) -> dict[str, Any]:
     """The shift of ``other`` from ``base`` (paired by layout) against the sampling error.
 
     Returns the mean shift, its 95 % t interval, the standard error of the baseline's mean,
-    both relative to the baseline's mean, whether ``|shift| <= WITHIN x`` that error, and
-    the p-values of the Wilcoxon signed-rank and two-sample Kolmogorov-Smirnov tests. Layouts
-    where either value is not finite (a concentration of no frictional energy) are left
-    out; ``n`` counts the rest.
+    both relative to the baseline's mean, whether the interval holds 0, and the p-values of
+    the Wilcoxon signed-rank and two-sample Kolmogorov-Smirnov tests. Layouts where either
+    value is not finite (a concentration of no frictional energy) are left out; ``n``
+    counts the rest.
     """
     from scipy import stats
 
@@ -100,7 +105,7 @@ def paired(base, other) -> dict[str, Any]:
         "base_se": se,
         "shift_rel": shift / scale,
         "base_se_rel": se / scale,
-        "within_sampling_error": bool(abs(shift) <= WITHIN * se) if n > 1 else None,
+        "within_sampling_error": bool(shift - half <= 0.0 <= shift + half) if n > 1 else None,
         "wilcoxon_p": None,
         "ks_p": float(stats.ks_2samp(a, b).pvalue) if n > 1 else None,
     }
@@ -188,13 +193,45 @@ def compare(runs: list[dict], laws, comparisons) -> dict[str, Any]:
                 np.asarray(base["released"])[ok], np.asarray(other["released"])[ok]
             )
             entry["left_out"] = int((~ok).sum())
-            entry["all_within"] = bool(
-                all(entry[m]["within_sampling_error"] for m in MEASURES)
-                and entry["released"]["p"] > 0.05
-            )
             key = f"{law}: {integ} {ratio:g} against {base_integ} {base_ratio:g}"
             out[key] = entry
+    # Holm over every test of the run: each measure's Wilcoxon p and each released's McNemar p.
+    tests = [
+        (c[m], "wilcoxon_p" if m in MEASURES else "p")
+        for c in out.values()
+        for m in (*MEASURES, "released")
+        if c[m].get("wilcoxon_p" if m in MEASURES else "p") is not None
+    ]
+    adjusted = holm([t[k] for t, k in tests])
+    for (t, _), p in zip(tests, adjusted):
+        t["holm_p"] = p
+        t["differs"] = bool(p < ALPHA)
+    for c in out.values():
+        c["any_differs"] = any(c[m].get("differs", False) for m in (*MEASURES, "released"))
     return out
+
+
+def holm(p) -> list[float]:
+    """Holm's step-down adjusted p-values, in the order given."""
+    p = np.asarray(p, dtype=float)
+    order = np.argsort(p, kind="stable")
+    m = p.size
+    adjusted = np.empty(m)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        adjusted[i] = running
+    return adjusted.tolist()
+
+
+def _shift(c: dict[str, Any]) -> str:
+    """``+25 % [+3, +47] (Holm p 0.3)``: a shift, its interval, relative to the other's mean."""
+    b = c["base_mean"] or 1.0
+    lo, hi = c["shift_ci95"]
+    holm_p = c.get("holm_p")
+    return f"{c['shift_rel'] * 100:+.0f} % [{lo / b * 100:+.0f}, {hi / b * 100:+.0f}]" + (
+        f" (Holm p {holm_p:.2g})" if holm_p is not None else ""
+    )
 
 
 def plot(summary: dict[str, Any], path: Path) -> None:
@@ -206,7 +243,6 @@ def plot(summary: dict[str, Any], path: Path) -> None:
     columns = (*MEASURES, "released")
     fig = Figure(figsize=(3.4 * len(columns), 2.9 * len(laws)), constrained_layout=True)
     axes = fig.subplots(len(laws), len(columns), squeeze=False)
-    labels = [f"{i}\n{r:g}" for i, r in summary["settings"]["cases"]]
     for row, law in enumerate(laws):
         runs = [r for r in summary["runs"] if r["law"] == law]
         for col, m in enumerate(columns):
@@ -220,7 +256,14 @@ def plot(summary: dict[str, Any], path: Path) -> None:
                 if (r["integrator"], r["nominal"]) == BASELINE:
                     ax.axhspan(v.mean() - half, v.mean() + half, color="0.85", zorder=0)
             ax.set_xticks(range(len(runs)))
-            ax.set_xticklabels(labels[: len(runs)], fontsize=7)
+            ax.set_xticklabels(
+                [
+                    f"{r['integrator']}\n{r['nominal']:g}"
+                    + ("" if r["status"] == "complete" else "\n(stopped)")
+                    for r in runs
+                ],
+                fontsize=7,
+            )
             ax.set_title(f"{law}: {m}", fontsize=9)
     fig.suptitle(
         f"Pillar scene over {summary['settings']['layouts']} layouts, "
@@ -286,7 +329,8 @@ def run(out_dir: str | Path, quick: bool = False, reuse: bool = False, log=print
             "laws": list(cfg["laws"]),
             "cases": [list(c) for c in cfg["cases"]],
             "comparisons": [[list(a), list(b)] for a, b in cfg["comparisons"]],
-            "within": f"|mean paired shift| <= {WITHIN} standard errors of the other's mean",
+            "within": "the paired shift's 95 % t interval holds 0",
+            "differs": f"Holm-adjusted Wilcoxon (McNemar) p < {ALPHA} over every test of the run",
         },
         "runs": runs,
         "comparisons": compare(runs, cfg["laws"], cfg["comparisons"]),
@@ -296,15 +340,12 @@ def run(out_dir: str | Path, quick: bool = False, reuse: bool = False, log=print
         if not c["peak_force"]["n"]:
             log(f"dem ensemble: {key}: no layout to compare (a batch stopped)")
             continue
-        shifts = ", ".join(
-            f"{m} {c[m]['shift_rel'] * 100:+.1f} % (se {c[m]['base_se_rel'] * 100:.1f} %)"
-            for m in MEASURES
-        )
+        shifts = ", ".join(f"{m} {_shift(c[m])}" for m in MEASURES)
         rel = c["released"]
         log(
             f"dem ensemble: {key}: {shifts}; released {rel['base']} -> {rel['other']} "
-            f"(McNemar p {rel['p']:.2g}); {'within' if c['all_within'] else 'NOT within'} the "
-            "sampling error"
+            f"(McNemar p {rel['p']:.2g}); "
+            + ("DIFFERS (Holm)" if c["any_differs"] else "no shift beyond the sampling error")
         )
     path.write_text(json.dumps(summary, indent=1) + "\n")
     plot(summary, out_dir / "dem_ensemble.png")
@@ -312,4 +353,4 @@ def run(out_dir: str | Path, quick: bool = False, reuse: bool = False, log=print
     return summary
 
 
-__all__ = ["compare", "mcnemar", "paired", "run", "run_case"]
+__all__ = ["compare", "holm", "mcnemar", "paired", "run", "run_case"]

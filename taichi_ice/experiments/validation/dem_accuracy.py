@@ -26,11 +26,13 @@ jam at full load survive, per integrator, and from them and the errors the recom
 ``dt_safety`` of each integrator.
 
 Cost: ``wall per simulated second = (wall per step) / dt``, the wall per step measured on a
-world alone at the default ratio (per scene, law and precision), over ``TIMING_SPAN`` more
-seconds after its run, so that no kernel compilation is timed (the work of a step does not
-depend on dt). The other ratios run each scene's laws batched (a world's trajectory does
-not depend on its batch); every new dt costs a kernel compilation (~10 s on 2 cores), which
-is much of the study's ~8 minutes.
+world alone at the default ratio (per scene, law, integrator and precision), over
+``TIMING_SPAN`` more seconds after its run, so that no kernel compilation is timed (the
+work of a step does not depend on dt). The other ratios run each scene's laws batched (a
+world's trajectory does not depend on its batch). Nothing compiled depends on dt, and each
+Simulation takes the World of the last one of its layout from the process's pool
+(``engine.pool``), so a new dt reloads a World instead of compiling one: the study compiles
+once per layout and integrator.
 
 Taichi holds one precision per process: each precision runs in its own worker process
 (``python -m taichi_ice.commands.validate dem_accuracy --worker f32 ...``; ``--quick`` runs
@@ -61,9 +63,8 @@ from . import dem_scenes
 LAWS = ("coulomb", "rate-state")
 INTEGRATORS = ("euler", "analytic")  # engine.options.INTEGRATORS, the default first
 COLLISIONS = dem_scenes.COLLISIONS
-# dt / stable_dt of the collisions (batched: four worlds per dt). Every new dt compiles the
-# kernels afresh (~10 s on 2 cores, ~2 s once Taichi's offline cache holds them), so float32,
-# which only adds round-off, takes fewer.
+# dt / stable_dt of the collisions (batched: four worlds per dt; a new dt reloads the World
+# of the last, compiling nothing). Float32, which only adds round-off, takes fewer.
 COLLISION_RATIOS = {
     "f64": (0.0125, 0.05, 0.2, 0.8, 1.6),
     "f32": (0.2,),

@@ -116,13 +116,12 @@ def test_impulses_account_for_the_motion():
 
 @pytest.fixture(scope="module")
 def kernel(taichi_runtime):
-    if taichi_runtime[1] != "f64":
-        # fdlibm's cos and sin (polygon_ti.rotation_ti) take the run's float type for their
-        # constants; the float32 engine computes in float32 (the engine tests cover it).
-        pytest.skip("the float64 twins need a float64 run")
     n = 400
-    ins = ti.field(ti.f64, shape=(n, 8))
-    outs = ti.field(ti.f64, shape=(n, 5))
+    # The run's float type, as the engine calls it (SPIR-V has no float64 cos and sin: a
+    # float32 run on Vulkan computes them in float32).
+    real = ti.f64 if taichi_runtime[1] == "f64" else ti.f32
+    ins = ti.field(real, shape=(n, 8))
+    outs = ti.field(real, shape=(n, 5))
 
     @ti.kernel
     def run(clamp: ti.template()):
@@ -140,17 +139,19 @@ def kernel(taichi_runtime):
             )
             outs[i, 0], outs[i, 1], outs[i, 2], outs[i, 3], outs[i, 4] = p, q, v, x1, u1
 
-    return ins, outs, run
+    return ins, outs, run, taichi_runtime[1]
 
 
 @pytest.mark.parametrize("clamp", [True, False], ids=["normal", "tangential"])
 def test_the_taichi_twin_equals_numpy_on_random_contacts(kernel, clamp):
     """Seeded random contacts, from stuck to flying apart inside the step, onset or not, and
     every damping regime: the kernel's ``(P, Q, P_viscous, x1, u1)`` are the NumPy twin's to
-    round-off (float64 fields in a run of either precision; on the CPU bit for bit but where
-    the compiler fuses a multiply-add, on Vulkan within 1e-9 of the terms they are
-    differences of)."""
-    ins, outs, run = kernel
+    round-off: in float64 on the CPU bit for bit but where the compiler fuses a multiply-add,
+    on Vulkan within 1e-9 of the terms they are differences of. A float32 run computes in
+    float32 (the NumPy twin in float64 on the same, rounded, inputs): measured over 4,000
+    draws, 99.5-99.98 % of them within 1e-6 of the terms (median 5e-8), all within 3.1e-5
+    (CPU and Vulkan); the bounds below are 99 % and 1e-4."""
+    ins, outs, run, precision = kernel
     n = ins.shape[0]
     rows = np.empty((n, 8))
     for i in range(n):
@@ -162,6 +163,7 @@ def test_the_taichi_twin_equals_numpy_on_random_contacts(kernel, clamp):
         tau = RNG.choice([0.0, RNG.uniform(0.0, h)])
         rows[i] = (x, u, h, k, 2.0 * z * math.sqrt(k / inv_m), inv_m, RNG.uniform(-20, 20), tau)
     ins.from_numpy(rows)
+    rows = ins.to_numpy().astype(np.float64)  # as the kernel got them
     run(clamp)
     got = outs.to_numpy()
     want = np.array([spring_dashpot(*r[:7], clamp, r[7]) for r in rows])
@@ -171,4 +173,9 @@ def test_the_taichi_twin_equals_numpy_on_random_contacts(kernel, clamp):
     place = np.abs(x) + np.abs(u) * h + np.abs(a) * h * h
     speed = np.abs(u) + np.abs(a) * h + place / h
     scale = np.stack([speed / inv_m, place / inv_m, c * place, place, speed], axis=1)
-    assert np.all(np.abs(got - want) <= 1e-9 * scale)
+    off = np.abs(got - want) <= {"f64": 1e-9, "f32": 1e-6}[precision] * scale
+    if precision == "f64":
+        assert np.all(off)
+    else:
+        assert off.all(axis=1).mean() >= 0.99
+        assert np.all(np.abs(got - want) <= 1e-4 * scale)

@@ -12,7 +12,7 @@ loads them from the cache. Each process builds a ``Simulation`` of its scene and
 ``--until`` simulated seconds; "to first steps" is that wall time (compiling, loading the
 cache, building and running), "import" the ``import taichi_ice`` before it. The same
 process then changes the scene's stiffness and runs again (``in_process_s``): what a
-sweep's second value costs in one process.
+sweep's second value costs in one process; and then adds three bodies (``in_process_bodies_s``).
 
 Writes ``compile_reuse.json`` (the cases, the machine, the git state) and
 ``compile_reuse.png`` (a bar a case) into ``--out``, and prints the table.
@@ -44,14 +44,16 @@ CASES = (
     ),
     ("another dt", "[simulation] dt_safety 0.1", {"simulation.dt_safety=": 0.1}),
     ("larger floes", "every outline and position x 1.5 (same count)", {"scale": 1.5}),
-    ("one body more", "a copy of the last body, 5 m above it", {"add_body": 5.0}),
+    ("one body more", "a copy of the last body, 5 m above it", {"add_body": 1}),
+    ("five bodies more", "copies of the last body, 5 m apart above it", {"add_body": 5}),
+    ("ten bodies more", "copies of the last body, 5 m apart above it", {"add_body": 10}),
 )
 
 
 def changed(raw: dict, changes: dict) -> dict:
     """The scene's tables with ``changes``: ``"table.key": factor`` multiplies,
     ``"table.key=": value`` sets, ``"scale"`` scales every outline and position,
-    ``"add_body"`` copies the last body."""
+    ``"add_body": n`` adds n copies of the last body, 5 m apart above it."""
     import copy
 
     import numpy as np
@@ -69,11 +71,13 @@ def changed(raw: dict, changes: dict) -> dict:
                     body["vertices"] = (np.asarray(body["vertices"], float) * value).tolist()
             continue
         if key == "add_body":
-            extra = copy.deepcopy(raw["body"][-1])
-            extra["position"] = [extra["position"][0], extra["position"][1] + value]
-            extra["name"] = f"{extra.get('name', 'body')}-copy"
-            extra.pop("probe", None)
-            raw["body"].append(extra)
+            last = raw["body"][-1]
+            for k in range(1, int(value) + 1):
+                extra = copy.deepcopy(last)
+                extra["position"] = [last["position"][0], last["position"][1] + 5.0 * k]
+                extra["name"] = f"{last.get('name', 'body')}-copy{k}"
+                extra.pop("probe", None)
+                raw["body"].append(extra)
             continue
         table, name = key.rstrip("=").split(".")
         section = raw.setdefault(table, {})
@@ -87,7 +91,8 @@ def changed(raw: dict, changes: dict) -> dict:
 
 
 def worker(scene_path: str, changes: dict, until: float) -> dict:
-    """One case in this process: import, build, run; then the stiffness x 2 in process."""
+    """One case in this process: import, build, run; then in the same process the stiffness
+    x 3, and three bodies more."""
     start = time.perf_counter()
     from taichi_ice import Simulation, load_scenario
     from taichi_ice.scene.parse import scene_from_dict
@@ -99,10 +104,14 @@ def worker(scene_path: str, changes: dict, until: float) -> dict:
     first = time.perf_counter()
     again = scene_from_dict(changed(scene.raw, {"ice.contact_stiffness": 3.0}), base.source)
     Simulation(again, arch="cpu").run(until=until)
+    stiffer = time.perf_counter()
+    bigger = scene_from_dict(changed(scene.raw, {"add_body": 3}), base.source)
+    Simulation(bigger, arch="cpu").run(until=until)
     return {
         "import_s": imported - start,
         "to_first_steps_s": first - imported,
-        "in_process_s": time.perf_counter() - first,
+        "in_process_s": stiffer - first,
+        "in_process_bodies_s": time.perf_counter() - stiffer,
     }
 
 
@@ -134,7 +143,7 @@ def main(argv=None) -> int:
             print(
                 f"{name:38s} import {row['import_s']:5.1f} s  to first steps "
                 f"{row['to_first_steps_s']:5.1f} s  in process, stiffness x 3: "
-                f"{row['in_process_s']:5.1f} s",
+                f"{row['in_process_s']:5.1f} s, 3 bodies more: {row['in_process_bodies_s']:5.1f} s",
                 flush=True,
             )
     git = subprocess.run(
@@ -163,16 +172,21 @@ def _chart(rows, path: Path, scene: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
+    fig, ax = plt.subplots(figsize=(8, 0.55 * len(rows) + 1.4), layout="constrained")
     y = range(len(rows))
-    ax.barh(y, [r["to_first_steps_s"] for r in rows], color="tab:blue", label="fresh process")
-    ax.barh(
-        [i + 0.35 for i in y],
-        [r["in_process_s"] for r in rows],
-        height=0.3,
-        color="tab:orange",
-        label="same process, stiffness x 3 next",
+    bars = (
+        ("to_first_steps_s", "tab:blue", "fresh process"),
+        ("in_process_s", "tab:orange", "same process, stiffness x 3 next"),
+        ("in_process_bodies_s", "tab:green", "same process, then 3 bodies more"),
     )
+    for k, (key, colour, label) in enumerate(bars):
+        ax.barh(
+            [i + 0.28 * (k - 1) for i in y],
+            [r.get(key, 0.0) for r in rows],
+            height=0.26,
+            color=colour,
+            label=label,
+        )
     ax.set_yticks(list(y), [r["case"] for r in rows])
     ax.invert_yaxis()
     ax.set_xlabel("wall time to the first steps (s)")

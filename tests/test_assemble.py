@@ -147,3 +147,31 @@ def test_budget_residual_and_breach_on_hand_made_terms():
     assert budget.breached(now, start).tolist() == [1]
     assert budget.SERIES[EnergyTerm.WORK_IN] == "work_in"
     assert budget.SERIES[EnergyTerm.FRICTION] == "friction_energy"
+
+
+def test_the_sizes_compiled_are_capacities_and_the_host_arrays_the_scenes_counts():
+    """A layout's sizes are capacities: powers of two (with a floor) up to 4096, then
+    multiples of a power of two 8-16 times below the count, never below it and never more
+    than twice it (an eighth above 4096); the host arrays keep the scenes' counts, and
+    ``state.padded`` fills the rest of a field with zeros (a world past the scenes' starts
+    and ends at the last body)."""
+    from taichi_ice.engine.assemble import CAPACITY_POW2_MAX, capacity
+    from taichi_ice.engine.schema import var
+    from taichi_ice.engine.state import padded
+
+    for n in [*range(1, 300), 4095, 4096, 4097, 10_000, 99_999, 100_000, 1_000_000]:
+        c = capacity(n)
+        assert n <= c <= (2 * n if n <= CAPACITY_POW2_MAX else n * 1.125), n
+        assert capacity(c) == c  # a capacity is its own
+    assert [capacity(n, 8) for n in (1, 8, 9)] == [8, 8, 16]
+    assert capacity(10_000) == 10_240 and capacity(1_000_000) == 1_048_576
+
+    scene = load_scenario(ROOT / "scenarios" / "two_squares.toml")
+    batch = assemble([scene, scene, scene])
+    assert (batch.n_bodies, batch.real.n_worlds, batch.n_probes) == (6, 3, 3)
+    assert (batch.layout.n_bodies, batch.layout.n_worlds, batch.layout.n_probes) == (8, 4, 4)
+    assert batch.layout.max_verts == 4 and batch.host.body_mass.shape == (6,)
+    edges = padded(batch.host.world_body_start, var("world_body_start"), batch.layout)
+    assert edges.tolist() == [0, 2, 4, 6, 6]
+    mass = padded(batch.host.body_mass, var("body_mass"), batch.layout)
+    assert mass.tolist() == [*batch.host.body_mass.tolist(), 0.0, 0.0]

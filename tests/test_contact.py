@@ -132,7 +132,7 @@ def kernel_contacts(world: World) -> dict:
     theta = d.contact_theta.to_numpy() if world.layout.rate_state else None
     slip = d.contact_slip.to_numpy() if world.layout.rate_state else None
     out = {}
-    for i in range(world.layout.n_bodies):
+    for i in range(world.batch.n_bodies):
         for s in range(count[i]):
             th = float(theta[i, s]) if theta is not None else 0.0
             out[(i, int(partner[i, s]))] = (
@@ -154,15 +154,16 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
     world = World(scenes)
     model = ReferenceModel.from_scenes(scenes)
     d = world.data
-    vel = np.asarray(d.body_vel.to_numpy(), dtype=np.float64)
-    omega = np.asarray(d.body_omega.to_numpy(), dtype=np.float64)
+    vel, omega = world.velocities(), world.omegas()
     state = ReferenceState(pos=pos, angle=ang, vel=vel, omega=omega)
     # Each body's last velocity change, with which the contacts book their work at the
-    # mid-step velocity (``contact_law.contact_work``): random, as after a step.
+    # mid-step velocity (``contact_law.contact_work``): random, as after a step; the
+    # fields' rows past the bodies (their capacity) stay zero.
     dvel = rng.uniform(-0.05, 0.05, vel.shape)
     domega = rng.uniform(-0.05, 0.05, omega.shape)
-    d.body_dvel.from_numpy(dvel)
-    d.body_domega.from_numpy(domega)
+    rest = world.layout.n_bodies - len(vel)
+    d.body_dvel.from_numpy(np.pad(dvel, ((0, rest), (0, 0))))
+    d.body_domega.from_numpy(np.pad(domega, (0, rest)))
     memory: dict = {}
     seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0, "severed": 0}
     worst = 0.0  # largest force difference (N)

@@ -664,7 +664,7 @@ def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping, integr
     start = batch.positions()
     batch.advance(400)  # one launch per list lifetime: stopped by either world's rebuild
     # The lists were rebuilt on the way (they record where): some launch stopped early.
-    ref = batch.neighbours.nbr_ref_pos.to_numpy()[: batch.layout.n_bodies]
+    ref = batch.neighbours.nbr_ref_pos.to_numpy()[: batch.batch.n_bodies]
     assert np.max(np.hypot(*(ref - start).T)) > 0.5 * float(batch.host.list_skin)
     for w, scene in enumerate(scenes):
         alone = World([scene], dt=dt, stepping=stepping, integrator=integrator)
@@ -704,7 +704,10 @@ def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
     dt = min(soft.stable_dt, stiff.stable_dt) / 40
     batch = World([soft, stiff], dt=dt, stepping=stepping)
     alone = [World([s], dt=dt, stepping=stepping) for s in (soft, stiff)]
-    assert alone[0].layout.replace(n_worlds=2, n_bodies=4, n_probes=2, n_small=4) == batch.layout
+    # The batch's counts are within the lone world's capacities (8 bodies, 4 probes): the
+    # same layout but for the number of worlds.
+    assert alone[0].layout.replace(n_worlds=2) == batch.layout
+    assert (batch.batch.n_bodies, batch.batch.n_probes) == (4, 2)
     steps = round(0.02 / dt)
     for world in (batch, *alone):
         world.advance(steps)
@@ -758,7 +761,7 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law, inte
         world.check()
     # The lists were rebuilt after some block had moved half the skin (they record where),
     # at the same steps in every way of stepping: a team's launch stopped there.
-    n = by_worlds.layout.n_bodies
+    n = by_worlds.batch.n_bodies
     ref = by_worlds.neighbours.nbr_ref_pos.to_numpy()[:n]
     moved = np.max(np.hypot(*(ref - start).T))
     assert moved > 0.5 * float(by_worlds.host.list_skin)
@@ -785,7 +788,7 @@ def test_skipping_pairs_a_gap_keeps_apart_changes_nothing(f64, stepping):
         return
     skipping = World([scene], stepping=stepping)
     testing = World([scene], stepping=stepping)
-    n = skipping.layout.n_bodies
+    n = skipping.batch.n_bodies
     skippable = listed = 0
     for step in range(300):
         skipping.advance(1)
@@ -915,7 +918,8 @@ def test_sampled_advance_equals_stepping_and_reading_back(f64, name, plan):
     for n, record in plan:
         ref.advance(n)
         counts = ref.contact_counts()
-        want_rows.append(np.column_stack([ref.energies(), counts, ref.data.status.to_numpy()]))
+        status = ref.data.status.to_numpy()[: len(scenes)]
+        want_rows.append(np.column_stack([ref.energies(), counts, status]))
         if record:
             want_impulses.append(ref.take_probe_impulses())
     np.testing.assert_array_equal(rows, np.stack(want_rows))
@@ -923,7 +927,7 @@ def test_sampled_advance_equals_stepping_and_reading_back(f64, name, plan):
     np.testing.assert_array_equal(impulses[recorded], np.stack(want_impulses))
     # Every world made contacts, and a probe was pushed on in each recorded interval.
     assert rows[:, :, CONTACTS_COLUMN].max(axis=0).min() > 0
-    if ref.layout.n_probes:
+    if ref.batch.n_probes:
         assert np.all(np.abs(impulses[recorded[1:]]).max(axis=(1, 2)) > 0)
     assert not rows[:, :, STATUS_COLUMN:].any()
 

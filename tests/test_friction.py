@@ -535,7 +535,11 @@ def test_float32_batch_in_its_own_process():
         capture_output=True,
         text=True,
         cwd=root,
-        env={**os.environ, "PYTHONPATH": str(root)},
+        # The package first, and whatever else the parent imports from (its site folders).
+        env={
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")])),
+        },
         timeout=120,
     )
     assert proc.returncode == 0, proc.stderr

@@ -125,6 +125,53 @@ def test_a_simulation_reuses_a_world_no_one_holds_and_steps_as_a_new_one(pool):
             assert np.any(got["contact_force"] != 0.0)  # the contact was met
 
 
+def _with_squares(scene, n: int):
+    """``scene`` with ``n`` more copies of its last square, 3 m apart above it, falling in
+    at 0.5 m/s along y (no gravity: they drift, and the first meets the pair's right square
+    at about 4 s)."""
+    import copy
+
+    from taichi_ice.scene.parse import scene_from_dict
+
+    raw = copy.deepcopy(scene.raw)
+    last = raw["body"][-1]
+    for k in range(1, n + 1):
+        extra = {key: value for key, value in last.items() if key != "probe"}
+        extra.update(name=f"extra{k}", position=[last["position"][0], 3.0 * k])
+        extra["velocity"] = [0.0, -0.5]
+        raw["body"].append(extra)
+    return scene_from_dict(raw, source=scene.source)
+
+
+def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
+    """The sizes a World compiles for are capacities (``assemble.capacity``: 8 bodies at
+    least): two squares, then the same scene with three more, run on one World (built once,
+    reloaded once), and the second run is, field for field (the unused rows too), that of a
+    World built for it; ten more (12 bodies) need another layout."""
+    from taichi_ice.engine.assemble import assemble
+    from taichi_ice.engine.world import World
+    from taichi_ice.run.simulation import Simulation
+
+    base = load_scenario("two_squares")
+    five = _with_squares(base, 3)
+    assert assemble([five]).layout == assemble([base]).layout
+    assert assemble([_with_squares(base, 10)]).layout.n_bodies == 16
+    first = Simulation(base)
+    first.run(until=0.3)  # past the collision: the fields hold a contact's leftovers
+    del first
+    reused = Simulation(five)
+    assert (pool.built, pool.reloaded) == (1, 1)
+    fresh = Simulation(five, worlds=World)
+    for until in (0.25, 1.0):  # in the pair's collision, and after
+        for sim in (reused, fresh):
+            sim.run(until=until)
+        got, expected = _fields(reused.world), _fields(fresh.world)
+        for name in expected:
+            assert np.array_equal(got[name], expected[name]), (until, name)
+    assert len(reused.positions(0)) == 5
+    assert reused.positions(0)[2:, 1].tolist() == pytest.approx([2.5, 5.5, 8.5])
+
+
 def test_a_world_still_held_is_never_handed_out(pool):
     """A World that a live Simulation or a name still holds stays as it is: the next
     Simulation of its layout builds its own."""

@@ -151,7 +151,8 @@ CHILD_UNTIL = "1e5"  # s of simulated time: the children are stopped long before
 def test_sigterm_and_sigkill_leave_files_that_open_with_no_options(tmp_path):
     """SIGTERM stops a run as Ctrl-C does (a message, status failed, exit 143); after
     SIGTERM or SIGKILL the file opens with plain h5py and its series have one length."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    path = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+    env = {**os.environ, "PYTHONPATH": path}
     paths = {sig: tmp_path / f"{sig.name}.h5" for sig in (signal.SIGTERM, signal.SIGKILL)}
     procs = {
         sig: subprocess.Popen(

@@ -101,10 +101,10 @@ def test_host_arrays_of_the_wrong_shape_are_refused():
     arrays = dict(batch.host)
     arrays["body_mass"] = np.zeros(5)
     with pytest.raises(ValueError, match="body_mass"):
-        schema.HostArrays(batch.layout, arrays)
+        schema.HostArrays(batch.real, arrays)
     del arrays["body_mass"]
     with pytest.raises(ValueError, match=r"missing.*body_mass"):
-        schema.HostArrays(batch.layout, arrays)
+        schema.HostArrays(batch.real, arrays)
 
 
 def test_docs_state_table_is_generated_from_the_schema():
@@ -128,10 +128,10 @@ def test_traffic_model_counts_the_integrator_by_hand():
     # (6 x f64, codes.BodyEnergy); time_step (f64); for the neighbour lists small, world
     # (i32), radius (f64), the position and angle at the last build (3 x f64), the path
     # since (f64). No probes: probe_impulse moves nothing. Once: time_step, the world's
-    # runaway distance and the lists' skin (f64 each).
+    # runaway distance and the lists' skin (f64 each), and the bodies in use (i32).
     lists = 4 + 4 + 8 + 16 + 8 + 8
     body = 4 + 4 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 48 + lists
-    reads = n * body + 8 + 8 + 8
+    reads = n * body + 8 + 8 + 8 + 4
     # writes: force_q, torque_q, vel, omega, pos, angle, energy; the velocity changes that
     # the contacts book their work with (dvel 2 x f64, domega); the rotation (cos, sin);
     # the path; status (4 x i32); the stale flags (one world, and the batch's).

@@ -50,14 +50,60 @@ LIST_SLOTS = 2
 MAX_VERTS_LIMIT = MAX_VERTICES
 
 
+# The sizes a layout compiles for are capacities: the scenes' counts rounded up to a few
+# values (``capacity``), with a floor each, so that scenes of nearby sizes share a layout and
+# its compiled kernels (a World reloaded with them, or Taichi's offline cache in another
+# process). Powers of two up to CAPACITY_POW2_MAX (memory is no concern there), then steps
+# of an eighth to a sixteenth of the count (at most 12.5 % of rows unused at 1e4 bodies and
+# up). The rows past the scenes' are never read: the kernels loop over ``body_count``.
+CAPACITY_POW2_MAX = 4096
+CAPACITY_FLOORS = {
+    "n_bodies": 8,
+    "n_local_verts": 32,
+    "n_worlds": 1,
+    "n_probes": 4,
+    "n_small": 8,
+    "n_large": 4,
+}
+# Outline matrices the contact kernels unroll: a body of 3 vertices runs in the kernels of 4.
+MAX_VERTS_STEPS = (4, 8, MAX_VERTICES)
+
+
+def capacity(n: int, least: int = 1) -> int:
+    """The size compiled for ``n`` items: at least ``least``, a power of two up to
+    ``CAPACITY_POW2_MAX``, beyond it a multiple of the power of two 8-16 times below ``n``.
+
+    >>> [capacity(n) for n in (1, 3, 5, 64, 65, 4096, 4097, 10_000, 100_000)]
+    [1, 4, 8, 64, 128, 4096, 4608, 10240, 106496]
+    """
+    n = max(int(n), int(least))
+    p = 1 << (n - 1).bit_length() if n > 1 else 1
+    if p <= CAPACITY_POW2_MAX:
+        return p
+    step = 1 << (n.bit_length() - 4)
+    return -(-n // step) * step
+
+
+def capacities(sizes: dict) -> dict:
+    """The layout's sizes for the scenes' counts ``sizes`` (``capacity`` of each, with its
+    floor; ``max_verts`` to the next of ``MAX_VERTS_STEPS``)."""
+    out = {k: capacity(v, CAPACITY_FLOORS[k]) for k, v in sizes.items() if k in CAPACITY_FLOORS}
+    out["max_verts"] = next(m for m in MAX_VERTS_STEPS if m >= sizes["max_verts"])
+    return out
+
+
 @dataclass(frozen=True)
 class Batch:
     """Everything a batch of worlds needs before its fields exist.
 
     Attributes:
         scenes: the worlds, in order.
-        layout: sizes and compile-time switches (``schema.Layout``).
-        host: the arrays of every ``HOST`` field (``schema.HostArrays``).
+        layout: sizes and compile-time switches (``schema.Layout``): the capacities the
+            kernels compile for.
+        real: the layout with the scenes' own counts (bodies, worlds, probes, ...): the
+            shapes of ``host`` and of what readers return.
+        host: the arrays of every ``HOST`` field (``schema.HostArrays``), of the scenes'
+            counts (``state.upload`` pads them to the capacities).
         dt: the time step (s). stable_dt: the contact stability limit (s), over every world.
         default_slots: the contact slots per body these scenes get when none are asked for
             (``layout.slots`` unless ``Options.slots`` set them).
@@ -65,10 +111,21 @@ class Batch:
 
     scenes: tuple
     layout: Layout
+    real: Layout
     host: HostArrays
     dt: float
     stable_dt: float
     default_slots: int
+
+    @property
+    def n_bodies(self) -> int:
+        """Bodies of the scenes (``layout.n_bodies`` is the capacity)."""
+        return self.real.n_bodies
+
+    @property
+    def n_probes(self) -> int:
+        """Probes of the scenes."""
+        return self.real.n_probes
 
     def world_slices(self) -> list[slice]:
         """Body index range of each world."""
@@ -124,7 +181,8 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     arrays.update(_contact_values(scenes))
     arrays["grid_inv_cell"] = np.array(1.0 / (cell_size + skin))
     arrays["list_skin"] = np.array(skin)
-    layout = Layout(
+    arrays["body_count"] = np.array(sizes["n_bodies"], dtype=np.int32)
+    real = Layout(
         **sizes,
         slots=slots,
         nbr_len=LIST_SLOTS * slots,
@@ -141,12 +199,15 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
         energy=options.energy,
         integrator=options.integrator,
     )
+    caps = capacities(sizes)
+    layout = real.replace(**caps, hash_size=hash_size_for(caps["n_small"]))
     if not layout.crushing:
         arrays.pop("world_crushing_force")
     if not layout.water:
         arrays.pop("body_drag_linear")
         arrays.pop("body_drag_rotational")
-    return Batch(scenes, layout, HostArrays(layout, arrays), dt, stable_dt, default_slots)
+    host = HostArrays(real, arrays)
+    return Batch(scenes, layout, real, host, dt, stable_dt, default_slots)
 
 
 def hash_size_for(n_small: int) -> int:

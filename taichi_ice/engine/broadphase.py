@@ -52,6 +52,7 @@ class SpatialHash(Fields, Stage):
     ACCESS: ClassVar[dict[str, Access]] = {
         "build": Access(
             reads=(
+                "body_count",
                 "body_small",
                 "body_world",
                 "body_pos",
@@ -88,7 +89,7 @@ class SpatialHash(Fields, Stage):
         m, d = ti.static((self.model, self.data))
         for b in self.bucket_count:
             self.bucket_count[b] = 0
-        for i in range(self.layout.n_bodies):
+        for i in range(m.body_count[None]):
             if m.body_small[i]:
                 b = bucket_of(self.cell_of(d.body_pos[i]), m.body_world[i], self.mask)
                 ti.atomic_add(self.bucket_count[b], 1)
@@ -107,7 +108,7 @@ class SpatialHash(Fields, Stage):
             blk = k // SCAN
             if blk > 0:
                 self.bucket_end[k] += self.block_total[blk - 1]
-        for i in range(self.layout.n_bodies):
+        for i in range(m.body_count[None]):
             if m.body_small[i]:
                 b = bucket_of(self.cell_of(d.body_pos[i]), m.body_world[i], self.mask)
                 self.sorted_ids[ti.atomic_add(self.bucket_end[b], 1)] = i

@@ -21,17 +21,16 @@ For every candidate pair the owner body's thread clips the two outlines
 
 Ownership: each pair is handled once, by a dynamic body if exactly one is dynamic, else by
 the lower id; small-large pairs by the small body. The owner keeps the contact's memory
-(partner, ``xi``, ``theta``, slip rate, stored elastic energy, crushed area) in one of its K slots;
-a pair that no longer overlaps is not written again, so its memory is dropped. The slots
-are single-buffered: only the owner's thread touches them, and it copies the last step's
-memory out (``remember``) before writing this step's over it. More than K contacts raise
-the overflow status, which the simulation turns into an error.
+(partner, ``xi``, ``theta``, slip rate, stored elastic energy, crushed area) in one of its K
+slots; a pair that no longer overlaps is not written again, so its memory is dropped. The
+slots are single-buffered: only the owner's thread touches them, and it copies the last
+step's memory out (``remember``) before writing this step's over it. More than K contacts
+raise the overflow status, which the simulation turns into an error.
 
 Forces are gathered in 64-bit fixed point (``schema.FORCE_QUANTUM``), so a run is bit-for-bit
-reproducible on any number of threads and in any batch. (On a device whose integer atomics
-fail inside loops the whole quanta are summed in float64, exact below 2^53 of them:
-``backend.float_gather``.) Overflow reports there are plain stores of a count above the
-limit (``raise_status``), not the largest such count.
+reproducible on any number of threads and in any batch (where a device's integer atomics
+fail inside loops, whole quanta summed in float64, exact below 2^53: ``backend.float_gather``;
+its overflow reports are plain stores of a count above the limit, ``raise_status``).
 
 The contact laws are pure functions, each twice (``taichi_ice``'s twin convention: the plain
 name is the NumPy reference in ``contact_law``, ``_ti`` the Taichi function in
@@ -86,6 +85,7 @@ class ContactStage(ContactLists):
         "compute": Access(
             reads=(
                 # Model
+                "body_count",
                 "body_world",
                 "body_radius",
                 "body_local_start",
@@ -164,6 +164,7 @@ class ContactStage(ContactLists):
         ),
         "build_lists": Access(
             reads=(
+                "body_count",
                 "list_skin",
                 "body_world",
                 "body_kind",
@@ -595,5 +596,5 @@ class ContactStage(ContactLists):
     def compute(self):
         """Forces of every contact of the step in parallel over bodies, candidates from the
         neighbour lists, and the contacts' memory."""
-        for i in range(self.layout.n_bodies):
+        for i in range(self.model.body_count[None]):
             self.listed(i, self.data.time_step[None], False)

@@ -42,6 +42,7 @@ class Integrator(Stage):
         "advance": Access(
             reads=(
                 # Model
+                "body_count",
                 "body_probe",
                 "body_kind",
                 "body_force_ext",
@@ -92,7 +93,7 @@ class Integrator(Stage):
                 "nbr_path",
             ),
         ),
-        "orient": Access(reads=("body_angle",), writes=("body_rot",)),
+        "orient": Access(reads=("body_count", "body_angle"), writes=("body_rot",)),
     }
 
     def __init__(self, layout: Layout, model: Model, data: Data, neighbours):
@@ -103,7 +104,7 @@ class Integrator(Stage):
     def orient(self):
         """Turn every body to its angle (``body_rot``): once at set-up; the step turns the
         bodies that move."""
-        for i in range(self.layout.n_bodies):
+        for i in range(self.model.body_count[None]):
             self.turn(i)
 
     @ti.func
@@ -119,7 +120,7 @@ class Integrator(Stage):
 
     @ti.kernel
     def advance(self):
-        for i in range(self.layout.n_bodies):
+        for i in range(self.model.body_count[None]):
             self.body(i, self.data.time_step[None])
 
     @ti.func

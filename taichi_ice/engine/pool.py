@@ -5,12 +5,13 @@
     with POOL.lease() as make:         # a batch's Worlds, given back on leaving
         result = Simulation(scenes, worlds=make).run(until=10.0)
 
-A World compiles its kernels for its layout (its sizes, precision, law kind, integrator and
-stepping; values and dt are data), and a new World compiles them again even in a process
-that has compiled the same kernels before: Taichi keys them by the fields they close over,
-and writes its offline cache only when the process ends (measured on 2 cores with an empty
-cache: three ``Simulation`` of ``two_squares`` in one process took 13.0, 13.2 and 12.5 s to
-their first 0.01 s each with a new World; 12.6, 0.9 and 0.01 s from the pool). So a World
+A World compiles its kernels for its layout (its capacities, precision, law kind,
+integrator and stepping; values, dt and the counts below the capacities are data), and a
+new World compiles them again even in a process that has compiled the same kernels before:
+Taichi keys them by the fields they close over, and writes its offline cache only when the
+process ends (measured on 2 cores with an empty cache: three ``Simulation`` of
+``two_squares`` in one process took 13.0, 13.2 and 12.5 s to their first 0.01 s each with a
+new World; 12.6, 0.9 and 0.01 s from the pool). So a World
 is taken from the pool by every ``Simulation`` (``WorldPool.take``) and by the batches of
 sweeps, ensembles and studies (``lease``); one no longer used is handed out again, reloaded
 with the new scenes.
@@ -124,8 +125,8 @@ class WorldPool:
                 and w.precision == options.precision
                 and w.layout.energy == options.energy
                 and w.layout.integrator == options.integrator
-                and w.layout.n_worlds == len(scenes)
-                and w.layout.n_bodies == n_bodies
+                and w.layout.n_worlds >= len(scenes)
+                and w.layout.n_bodies >= n_bodies
                 and options.slots in (None, w.layout.slots)
             )
 

@@ -112,7 +112,7 @@ class ReferenceModel:
     @classmethod
     def from_batch(cls, batch: Batch, quantum: float | None = FORCE_QUANTUM):
         """The model of the batch a ``World`` uploads: the same arrays, nothing re-derived."""
-        host, layout = batch.host, batch.layout
+        host, layout = batch.host, batch.real  # the scenes' counts, as host's arrays
         start, count = host.body_local_start, host.body_vert_count
         if layout.coulomb:
             laws = tuple(float(mu) for mu in host.world_mu)

@@ -8,7 +8,11 @@ benchmark's traffic model (``stages.traffic``), which charges each stage for the
 declares it reads and writes (``stages.Stage``, in its own module with the check of those
 declarations against the kernels' source).
 
-Shapes are tuples of symbols that ``Layout.size`` resolves (MuJoCo Warp's convention):
+Shapes are tuples of symbols that ``Layout.size`` resolves (MuJoCo Warp's convention). The
+sizes are capacities (``assemble.capacity``: the scenes' counts rounded up to a few values),
+so that scenes of other sizes run on kernels compiled for one of their kind; the kernels
+loop over the bodies in use (``body_count``) and over every world (a world past the scenes'
+has no bodies), and readers take the scenes' counts (``assemble.Batch.real``).
 
 ========== ===============================================================================
 symbol     meaning
@@ -216,6 +220,7 @@ MODEL: tuple[Var, ...] = (
     Var("world_crushing_force", "real", ("n_worlds",), "N/m", "strength x thickness: the elastic normal force's cap per m of contact width", role="cold", when="crushing", init=HOST),
     Var("world_runaway_step", "real", ("n_worlds",), "m", "a dynamic body that moves farther in one step flags its world as diverged (RUNAWAY_STEP_FRACTION of its thinnest dynamic body; inf if none)", role="cold", init=HOST),
     Var("grid_inv_cell", "f64", (), "1/m", "1 / the spatial hash's cell edge (the largest small body's diameter plus the skin)", role="cold", init=HOST),
+    Var("body_count", "i32", (), "", "bodies of the batch: rows of the n_bodies fields in use (the rest is capacity, never read)", role="cold", init=HOST),
     Var("list_skin", "real", (), "m", "margin of the neighbour lists: a pair is listed when its bounding circles come within it, a world's lists rebuilt when a body has moved half of it", role="cold", init=HOST),
 )
 
@@ -307,12 +312,15 @@ class Layout:
     strength, the runaway distance, the hash's cell and the lists' skin are model fields
     (``world_contact_stiffness``, ..., ``grid_inv_cell``, ``list_skin``), and dt is
     ``time_step``, so a scene of another stiffness or floe size, or a run at another dt,
-    takes the kernels compiled for the first of its kind.
+    takes the kernels compiled for the first of its kind. Nor are the scenes' counts: the
+    sizes are capacities (``assemble.capacity``), and the bodies in use are ``body_count``,
+    so a scene of 5 bodies and one of 8 share kernels too.
 
     Attributes:
-        n_bodies, n_local_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size: sizes
-            (see the module table).
-        max_verts: most vertices of any body (the kernels' local outline matrices).
+        n_bodies, n_local_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size:
+            capacities (see the module table).
+        max_verts: most vertices a body may have, 4, 8 or 16 (the kernels' local outline
+            matrices).
         coulomb, rate_state: the batch's friction: every world Coulomb (``world_mu``), or
             rate-and-state columns for every world (``friction.contact_row``: the
             rate-and-state laws, and Coulomb worlds as A = B = 0).

@@ -124,8 +124,23 @@ class Data(Fields):
         super().__init__(layout, schema.groups()["data"])
 
 
+def padded(array: np.ndarray, v: Var, layout: Layout) -> np.ndarray:
+    """An assembled array of the scenes' counts, padded to the field's capacity: with zeros,
+    and a ``world_edges`` array with its last value (the worlds past the scenes' are empty)."""
+    shape = schema.allocated_shape(layout, v) + ((v.lanes,) if v.lanes > 1 else ())
+    if array.shape == shape:
+        return array
+    if array.ndim != len(shape) or any(a > b for a, b in zip(array.shape, shape)):
+        raise ValueError(f"host array {v.name}: shape {array.shape} exceeds its field's {shape}")
+    widths = [(0, b - a) for a, b in zip(array.shape, shape)]
+    if v.shape and v.shape[0] == "world_edges":
+        return np.pad(array, widths, mode="edge")
+    return np.pad(array, widths)
+
+
 def upload(model: Model, data: Data, host: HostArrays) -> None:
-    """Copy every assembled array into its field, cast to the field's type."""
+    """Copy every assembled array into its field, cast to the field's type, padded to the
+    field's capacity (``padded``)."""
     layout = model.layout
     for v in schema.host_vars():
         if not layout.exists(v):
@@ -134,8 +149,8 @@ def upload(model: Model, data: Data, host: HostArrays) -> None:
         array = np.ascontiguousarray(host[v.name], dtype=v.np_dtype(layout.precision))
         if not v.shape:  # a scalar field
             getattr(group, v.name)[None] = array.item()
-        elif array.size:
-            getattr(group, v.name).from_numpy(array)
+        else:
+            getattr(group, v.name).from_numpy(np.ascontiguousarray(padded(array, v, layout)))
 
 
-__all__ = ["Data", "Fields", "Model", "make_field", "ti_dtype", "upload"]
+__all__ = ["Data", "Fields", "Model", "make_field", "padded", "ti_dtype", "upload"]

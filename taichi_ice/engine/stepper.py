@@ -328,7 +328,7 @@ class BodyTeam(Stage):
     @ti.func
     def chunk(self, stage):
         """The first body of the next unclaimed chunk of ``stage`` (0: contacts, 1: the
-        integrator), ``n_bodies`` or more when all are claimed."""
+        integrator), ``body_count`` or more when all are claimed."""
         return ti.atomic_add(self.claimed[stage], 1) * self.CHUNK
 
     @ti.kernel
@@ -339,9 +339,10 @@ class BodyTeam(Stage):
         self.claimed[0] = 0
         self.claimed[1] = 0
         self.done[None] = n
-        nb, count = ti.static((self.neighbours, self.layout.n_bodies))
+        nb, m = ti.static((self.neighbours, self.contacts.model))
         ti.loop_config(parallelize=self.threads, block_dim=1)
         for t in range(self.threads):
+            count = m.body_count[None]
             dt = self.data.time_step[None]
             k = 0
             for s in range(n):

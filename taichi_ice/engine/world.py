@@ -372,13 +372,13 @@ class World:
                 for s, (n, record) in enumerate(plan):
                     self.advance(int(n))
                     self.energy.take(rows, impulses, s, int(record))
-        return rows[:, : len(self.scenes)], impulses[:, : self.layout.n_probes]
+        return rows[:, : len(self.scenes)], impulses[:, : self.batch.n_probes]
 
     def place(self, positions: np.ndarray, angles: np.ndarray) -> None:
         """Move every body to ``(N, 2)`` positions (m) and ``(N,)`` angles (rad): their
         outlines are turned and the neighbour lists rebuilt before the next step."""
         real = backend.real_dtype(self.precision)
-        n = self.layout.n_bodies
+        n = self.batch.n_bodies
         pos = self.data.body_pos.to_numpy()
         ang = self.data.body_angle.to_numpy()
         pos[:n] = np.asarray(positions, dtype=np.float64).reshape(n, 2)
@@ -409,29 +409,29 @@ class World:
 
     def positions(self) -> np.ndarray:
         """``(N, 2)`` centroids of every body of every world (m)."""
-        return self.data.body_pos.to_numpy()[: self.layout.n_bodies].astype(np.float64)
+        return self.data.body_pos.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def angles(self) -> np.ndarray:
         """``(N,)`` angles (rad)."""
-        return self.data.body_angle.to_numpy()[: self.layout.n_bodies].astype(np.float64)
+        return self.data.body_angle.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def velocities(self) -> np.ndarray:
         """``(N, 2)`` centroid velocities (m/s)."""
-        return self.data.body_vel.to_numpy()[: self.layout.n_bodies].astype(np.float64)
+        return self.data.body_vel.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def omegas(self) -> np.ndarray:
         """``(N,)`` angular velocities (rad/s)."""
-        return self.data.body_omega.to_numpy()[: self.layout.n_bodies].astype(np.float64)
+        return self.data.body_omega.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def take_probe_impulses(self) -> np.ndarray:
         """``(P, 2)`` contact impulse on each probe since the last call (N s); resets them."""
-        impulse = self.data.probe_impulse.to_numpy()[: self.layout.n_probes]
+        impulse = self.data.probe_impulse.to_numpy()[: self.batch.n_probes]
         self.data.probe_impulse.fill(0.0)
         return impulse
 
     def contact_counts(self) -> np.ndarray:
         """``(W,)`` number of contacts in each world after the last step."""
-        counts = self.data.contact_count.to_numpy()[: self.layout.n_bodies]
+        counts = self.data.contact_count.to_numpy()[: self.batch.n_bodies]
         return np.bincount(self.host.body_world, weights=counts, minlength=len(self.scenes)).astype(
             np.int64
         )

@@ -39,13 +39,14 @@ from ..errors import OutputError, RunFileError
 from ..scene.table import printable
 from .runfile_read import DAMAGE
 
-FORMAT_VERSION = "8"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "9"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
 #                       5: a body's rotation (body_rot) instead of its turned outline;
 #                       6: the neighbour lists' gaps and paths (nbr_gap, nbr_path);
 #                       7: a digest of everything in it (damage is refused, not restored)
 #                       8: the integrator (euler or analytic), whose state differs
+#                       9: fields at the layout's capacities (assemble.capacity)
 SUFFIX = ".ckpt"
 
 

@@ -174,7 +174,7 @@ def measure_size(spec: dict) -> dict:
     rss, peak = rss_bytes()
     contacts_per_step = float(np.mean(contacts))
     moved = traffic(world, contacts_per_step)
-    bodies = world.layout.n_bodies
+    bodies = world.batch.n_bodies
     row = {
         "scene": spec["scene"],
         "blocks": n_blocks,

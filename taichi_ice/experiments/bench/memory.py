@@ -41,14 +41,17 @@ def traffic(world, contacts: float) -> dict:
     from ...engine.world import STAGES
 
     kernels = STEP_KERNELS[getattr(world, "stepping", "bodies")]
-    per_kernel = stages.traffic(STAGES, world.layout, contacts, kernels)
+    # The kernels touch the scenes' bodies, not the capacity past them; the hash's buckets
+    # are cleared whole.
+    layout = world.batch.real.replace(hash_size=world.layout.hash_size)
+    per_kernel = stages.traffic(STAGES, layout, contacts, kernels)
     total = per_kernel.pop("total")
-    no_contacts = stages.traffic(STAGES, world.layout, 0.0, kernels)["total"]
-    one_contact = stages.traffic(STAGES, world.layout, 1.0, kernels)["total"]
+    no_contacts = stages.traffic(STAGES, layout, 0.0, kernels)["total"]
+    one_contact = stages.traffic(STAGES, layout, 1.0, kernels)["total"]
     return {
         "bytes_per_step": total,
         "bytes_per_kernel": per_kernel,
-        "bytes_per_body": no_contacts / world.layout.n_bodies,
+        "bytes_per_body": no_contacts / layout.n_bodies,
         "bytes_per_contact": one_contact - no_contacts,
     }
 

@@ -817,8 +817,12 @@ def test_a_world_past_taichis_field_trees_is_refused_with_a_clear_error(monkeypa
     CUDA's limit: on Vulkan a process held 700 trees, ``backend.field_tree_limit``.)"""
     if backend.field_tree_limit() is None:
         pytest.skip("Taichi's SPIR-V backends have no limit on trees of fields")
+    from taichi_ice.engine import world as world_module
+
     scene = load_scenario("scenarios/two_squares.toml")
     monkeypatch.setattr(backend, "field_trees", lambda: backend.MAX_FIELD_TREES - 1)
+    # No World gone whose fields it could take (world.Engines): it needs new ones.
+    monkeypatch.setattr(world_module, "ENGINES", world_module.Engines())
     with pytest.raises(UsageError, match=r"World\.reload.*new process"):
         World([scene])
 
@@ -827,10 +831,11 @@ def test_fields_of_a_world_take_two_trees(f64):
     """Fields are filled after a group is declared (state.Fields), so a World adds two trees
     of fields, not one per filled field: ~250 Worlds fit a process, not ~100."""
     scene = load_scenario("scenarios/two_squares.toml")
-    World([scene], stepping="worlds")  # anything pending from before goes into its trees
+    first = World([scene], stepping="worlds")  # anything pending goes into its trees
     before = backend.field_trees()
-    World([scene], stepping="worlds")
-    World([scene], stepping="worlds")
+    # Held, so that each takes new fields (a World gone gives its own to the next one).
+    kept = [World([scene], stepping="worlds") for _ in range(2)]
+    assert len({id(w.data) for w in (first, *kept)}) == 3
     # On SPIR-V no tree mixes 32-bit and 64-bit fields (state.Fields: Taichi's layout fault
     # there), 6-7 a World; those backends have no limit on trees (field_tree_limit).
     per_world = 2 if backend.field_tree_limit() is not None else 7

@@ -172,6 +172,39 @@ def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
     assert reused.positions(0)[2:, 1].tolist() == pytest.approx([2.5, 5.5, 8.5])
 
 
+def test_a_world_on_the_fields_of_one_gone_steps_as_one_on_new_fields(monkeypatch):
+    """A World that is collected gives its fields and compiled stages to the next World of
+    its layout (``world.Engines``): that World runs, field for field, as one built on new
+    fields at the same time (the first is still held then), here the rate-and-state sliding
+    block after a run of it with other coefficients left its fields full."""
+    from taichi_ice.engine import world as world_module
+    from taichi_ice.engine.world import World
+    from taichi_ice.physics.friction import RateState
+
+    engines = world_module.Engines()
+    monkeypatch.setattr(world_module, "ENGINES", engines)
+    block = load_scenario("sliding_block").with_friction(RateState())
+    other = load_scenario("sliding_block").with_friction(RateState(A=0.02, B=0.03, t_c=1.0))
+    used = World([other], stepping="worlds")
+    used.advance(4000)
+    used.check()
+    data = used.data
+    del used
+    assert engines.idle() == 1
+    again = World([block], stepping="worlds")
+    assert again.data is data and (engines.built, engines.reused) == (1, 1)
+    new = World([block], stepping="worlds")  # `again` holds the idle fields: new ones
+    assert new.data is not data and engines.built == 2
+    for world in (again, new):
+        world.advance(3000)
+        world.check()
+    got, expected = _fields(again), _fields(new)
+    for name in expected:
+        assert np.array_equal(got[name], expected[name]), name
+    theta = got["contact_theta"][got["contact_partner"] >= 0]
+    assert theta.size and np.all(theta != 0.0)  # rate-and-state memory was compared
+
+
 def test_a_world_still_held_is_never_handed_out(pool):
     """A World that a live Simulation or a name still holds stays as it is: the next
     Simulation of its layout builds its own."""

@@ -23,6 +23,8 @@ contact and integration code body by body. All three give bit-identical states.
 from __future__ import annotations
 
 import dataclasses
+import threading
+import weakref
 from collections.abc import Sequence
 
 import numpy as np
@@ -122,6 +124,11 @@ class World:
             (worlds stepping, or a GPU: a kernel per stage and step). Setting it to None
             steps with the kernels per stage instead, to compare (same state bit for bit).
 
+    A World that is collected leaves its fields and compiled kernels to the next World of
+    its layout in the process (``Engines``; every field back to its start, bit for bit a
+    World on new fields): building one is seconds of compiling the first time, milliseconds
+    after.
+
     Raises:
         UsageError: an option out of range (``Options``); or the process holds too many of
             Taichi's trees of fields for another World (``backend.field_tree_limit``; Taichi
@@ -130,24 +137,11 @@ class World:
 
     def __init__(self, scenes: Sequence, options: Options | None = None, **changes):
         options = options_of(options, changes).resolved()
-        limit = backend.field_tree_limit()
-        if limit is not None and backend.field_trees() + TREES_PER_WORLD > limit:
-            raise UsageError(
-                f"this process holds {backend.field_trees()} trees of Taichi fields, the most "
-                f"it can ({limit}: about {limit // TREES_PER_WORLD}-{limit // 2} "
-                "Worlds; Taichi never frees them): step other scenes of the same layout on a "
-                "World built before (World.reload), or build the rest in a new process"
-            )
         self.batch = assemble(scenes, options)
         self.scenes = list(self.batch.scenes)
         self.layout, self.host = self.batch.layout, self.batch.host
         self.dt, self.stable_dt = self.batch.dt, self.batch.stable_dt
         self.precision = options.precision
-        self.model = state.Model(self.layout)
-        self.data = state.Data(self.layout)
-        state.upload(self.model, self.data, self.host)
-        self.data.time_step[None] = self.dt
-
         stepping = options.stepping
         if stepping == "auto":
             stepping = auto_stepping(
@@ -158,30 +152,23 @@ class World:
             )
         self.stepping = stepping
         self.options = options.replace(stepping=stepping, slots=self.layout.slots)
-
-        self.hash = SpatialHash(self.layout, self.model, self.data)
-        self.neighbours = NeighbourList(self.layout)
-        self.contacts = ContactStage(self.layout, self.model, self.data, self.hash, self.neighbours)
-        self.integrator = Integrator(self.layout, self.model, self.data, self.neighbours)
-        self.integrator.orient()
-        self.energy = EnergyMeter(self.layout, self.model, self.data)
-        self.stepper = WorldStepper(
-            self.layout,
-            self.model,
-            self.data,
-            self.neighbours,
-            self.contacts,
-            self.integrator,
-            self.energy,
-        )
         # The parallel step on the CPU: one launch for many steps (``BodyTeam``); None
         # launches the two stages' kernels every step (GPU, or set to None to compare).
-        self.team = None
+        threads = None
         if stepping == "bodies" and backend.actual_arch() in (None, "cpu"):
             threads = min(backend.cpu_threads(), backend.usable_cores())
-            self.team = BodyTeam(
-                self.layout, self.data, self.neighbours, self.contacts, self.integrator, threads
-            )
+        key = (self.layout, stepping, threads, backend.generation())
+        parts = ENGINES.take(key)
+        reused = parts is not None
+        if parts is None:
+            parts = self._build(threads)
+        for name, part in parts.items():
+            setattr(self, name, part)
+        if reused:  # fields of a World gone: every one back to its start, these scenes in
+            self._start()
+        # When this World is gone, its fields and compiled kernels serve the next World of
+        # its layout (``Engines``).
+        weakref.finalize(self, ENGINES.give_back, key, parts)
         # What WorldStepper.run is handed when it takes no sample (it writes nothing there).
         self._no_samples = (np.zeros((1, 1, SAMPLE_COLUMNS)), np.zeros((1, 1, 2)))
         self.steps = 0
@@ -191,6 +178,43 @@ class World:
         # (the energies before the first step) unless the device had finished; a sync here
         # made every later read right (tests/test_engine.py, sampled against stepped).
         ti.sync()
+
+    def _build(self, threads: int | None) -> dict:
+        """New fields for this World's layout, the scenes uploaded, and the stages whose
+        kernels close over them (compiled at their first launch)."""
+        limit = backend.field_tree_limit()
+        if limit is not None and backend.field_trees() + TREES_PER_WORLD > limit:
+            raise UsageError(
+                f"this process holds {backend.field_trees()} trees of Taichi fields, the most "
+                f"it can ({limit}: about {limit // TREES_PER_WORLD}-{limit // 2} "
+                "Worlds; Taichi never frees them): step other scenes of the same layout on a "
+                "World built before (World.reload), or build the rest in a new process"
+            )
+        layout = self.layout
+        model, data = state.Model(layout), state.Data(layout)
+        state.upload(model, data, self.host)
+        data.time_step[None] = self.dt
+        hash_ = SpatialHash(layout, model, data)
+        neighbours = NeighbourList(layout)
+        contacts = ContactStage(layout, model, data, hash_, neighbours)
+        integrator = Integrator(layout, model, data, neighbours)
+        integrator.orient()
+        energy = EnergyMeter(layout, model, data)
+        stepper = WorldStepper(layout, model, data, neighbours, contacts, integrator, energy)
+        team = None
+        if threads is not None:
+            team = BodyTeam(layout, data, neighbours, contacts, integrator, threads)
+        return {
+            "model": model,
+            "data": data,
+            "hash": hash_,
+            "neighbours": neighbours,
+            "contacts": contacts,
+            "integrator": integrator,
+            "energy": energy,
+            "stepper": stepper,
+            "team": team,
+        }
 
     # ----------------------------------------------------------------------------------------
     # Reuse: other scenes on the same fields and compiled kernels
@@ -231,6 +255,14 @@ class World:
         self.scenes = list(batch.scenes)
         self.host = batch.host
         self.dt, self.stable_dt = batch.dt, batch.stable_dt
+        self._start()
+        self.steps = 0
+        self.time = 0.0
+
+    def _start(self) -> None:
+        """Every field to its declared start (``schema.groups()``: a fill with ``Var.init``,
+        then the assembled ``HOST`` arrays), dt set, the outlines turned and the neighbour
+        lists marked stale: the fields of a new World of these scenes."""
         fields = self._declared_fields()
         for group in schema.groups().values():
             for v in group:
@@ -241,8 +273,6 @@ class World:
         self.integrator.orient()
         self.neighbours.world_nbr_stale.fill(1)
         self.neighbours.nbr_rebuild[None] = 1
-        self.steps = 0
-        self.time = 0.0
 
     def _declared_fields(self) -> dict:
         """Every field declared in ``schema.groups()``, by name, from the groups of fields
@@ -445,6 +475,62 @@ class World:
         return self.batch.probe_slices()
 
 
+class Engines:
+    """The fields and compiled stages of Worlds that are gone, by layout, for the next World
+    of that layout in this process.
+
+    A World's kernels close over its fields, so a new World compiles every kernel anew even
+    where the process compiled the same ones before (Taichi keys them by the fields; its
+    offline cache serves only a new process), and Taichi frees no field before the process
+    ends. So when a World is collected its parts (fields and stages, ``World._build``) come
+    here, and a World built later for the same layout, stepping and team takes them,
+    every field back to its start (``World._start``, as ``World.reload``): no new fields,
+    nothing compiled, and, bit for bit, the run of a World on new fields
+    (``tests/test_options.py``). Parts of an earlier Taichi start are dropped.
+
+    Attributes:
+        built, reused: Worlds built on new fields, and on fields of a World gone, so far.
+    """
+
+    def __init__(self):
+        self._idle: dict[tuple, list[dict]] = {}
+        self._lock = threading.Lock()
+        self.built = 0
+        self.reused = 0
+
+    def take(self, key: tuple) -> dict | None:
+        """The parts of a World gone for ``key`` (layout, stepping, team, generation), or
+        None (the caller builds them: counted as built)."""
+        with self._lock:
+            generation = key[-1]
+            self._idle = {k: v for k, v in self._idle.items() if k[-1] == generation and v}
+            idle = self._idle.get(key)
+            if idle:
+                self.reused += 1
+                return idle.pop()
+            self.built += 1
+            return None
+
+    def give_back(self, key: tuple, parts: dict) -> None:
+        """``parts`` of a World gone, for the next World of ``key``."""
+        with self._lock:
+            self._idle.setdefault(key, []).append(parts)
+
+    def clear(self) -> None:
+        """Forget every idle part (their fields stay allocated until the process ends)."""
+        with self._lock:
+            self._idle.clear()
+
+    def idle(self) -> int:
+        """Parts waiting for a World."""
+        with self._lock:
+            return sum(len(v) for v in self._idle.values())
+
+
+# This process's idle parts of Worlds.
+ENGINES = Engines()
+
+
 def _layout_difference(have, want) -> str:
     """``"n_worlds 3 here, 2 for the scenes, ..."``: the fields of two layouts that differ."""
     diff = [
@@ -455,4 +541,4 @@ def _layout_difference(have, want) -> str:
     return ", ".join(diff)
 
 
-__all__ = ["STAGES", "World", "auto_stepping"]
+__all__ = ["ENGINES", "STAGES", "Engines", "World", "auto_stepping"]

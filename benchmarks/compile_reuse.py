@@ -191,7 +191,7 @@ def _chart(rows, path: Path, scene: str) -> None:
     ax.invert_yaxis()
     ax.set_xlabel("wall time to the first steps (s)")
     ax.set_title(f"{scene}: compiled once per kind, one Taichi cache")
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="center right", fontsize=8)
     fig.savefig(path, dpi=120)
     plt.close(fig)
 

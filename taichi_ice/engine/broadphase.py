@@ -89,8 +89,8 @@ class SpatialHash(Fields, Stage):
         m, d = ti.static((self.model, self.data))
         for b in self.bucket_count:
             self.bucket_count[b] = 0
-        for i in range(m.body_count[None]):
-            if m.body_small[i]:
+        for i in range(self.layout.n_bodies):
+            if i < m.body_count[None] and m.body_small[i]:
                 b = bucket_of(self.cell_of(d.body_pos[i]), m.body_world[i], self.mask)
                 ti.atomic_add(self.bucket_count[b], 1)
         # Two-level exclusive scan: block-local sums in parallel, block offsets serially.
@@ -108,8 +108,8 @@ class SpatialHash(Fields, Stage):
             blk = k // SCAN
             if blk > 0:
                 self.bucket_end[k] += self.block_total[blk - 1]
-        for i in range(m.body_count[None]):
-            if m.body_small[i]:
+        for i in range(self.layout.n_bodies):
+            if i < m.body_count[None] and m.body_small[i]:
                 b = bucket_of(self.cell_of(d.body_pos[i]), m.body_world[i], self.mask)
                 self.sorted_ids[ti.atomic_add(self.bucket_end[b], 1)] = i
 

@@ -594,7 +594,7 @@ class ContactStage(ContactLists):
 
     @ti.kernel
     def compute(self):
-        """Forces of every contact of the step in parallel over bodies, candidates from the
-        neighbour lists, and the contacts' memory."""
-        for i in range(self.model.body_count[None]):
-            self.listed(i, self.data.time_step[None], False)
+        """Every contact's force and memory this step, in parallel over the bodies in use."""
+        for i in range(self.layout.n_bodies):
+            if i < self.model.body_count[None]:
+                self.listed(i, self.data.time_step[None], False)

@@ -235,8 +235,8 @@ class ContactLists(Stage):
         """Rebuild the neighbour lists of every stale world from the spatial hash (built
         from the current positions first, ``SpatialHash.build``)."""
         m, nb = ti.static((self.model, self.neighbours))
-        for i in range(m.body_count[None]):
-            if nb.world_nbr_stale[m.body_world[i]]:
+        for i in range(self.layout.n_bodies):
+            if i < m.body_count[None] and nb.world_nbr_stale[m.body_world[i]]:
                 self.build_list_hashed(i)
         for w in range(self.layout.n_worlds):
             nb.world_nbr_stale[w] = 0

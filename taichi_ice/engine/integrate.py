@@ -104,8 +104,9 @@ class Integrator(Stage):
     def orient(self):
         """Turn every body to its angle (``body_rot``): once at set-up; the step turns the
         bodies that move."""
-        for i in range(self.model.body_count[None]):
-            self.turn(i)
+        for i in range(self.layout.n_bodies):  # the capacity: a launch of known size
+            if i < self.model.body_count[None]:
+                self.turn(i)
 
     @ti.func
     def turn(self, i):
@@ -120,8 +121,9 @@ class Integrator(Stage):
 
     @ti.kernel
     def advance(self):
-        for i in range(self.model.body_count[None]):
-            self.body(i, self.data.time_step[None])
+        for i in range(self.layout.n_bodies):
+            if i < self.model.body_count[None]:
+                self.body(i, self.data.time_step[None])
 
     @ti.func
     def moved(self, i):

@@ -564,12 +564,17 @@ def test_taichi_rotation_equals_its_numpy_twin_bit_for_bit(taichi_runtime):
     # On Vulkan and Metal an angle past ROTATION_REDUCED_MAX is reduced by whole turns
     # instead of handed to libm (they have no float64 cos): the twin does the same.
     c, s = rotation(x, portable=backend.portable_f64())
-    if backend.portable_f64():
+    if backend.actual_arch() in (*backend.SPIRV_ARCHES, "cuda"):
         # SPIR-V lets the driver fuse a multiply and an add (Taichi marks no NoContraction),
         # and Mesa's lavapipe does: 13 % of these angles differ from the twin by an ulp of 1.
+        # LLVM's NVPTX contracts them too, with Taichi's fast math off: on an H100 (driver
+        # 580.159, 2026-11-26) cos differed by an ulp in 377 of 40,285 angles. Within an ulp
+        # there; bit for bit is a strict expected failure (as test_fmath's).
         np.testing.assert_allclose(got[:, 0], c, rtol=0, atol=2.3e-16)
         np.testing.assert_allclose(got[:, 1], s, rtol=0, atol=2.3e-16)
-        return
+        equal = np.array_equal(got[:, 0], c) and np.array_equal(got[:, 1], s)
+        assert not equal, f"bit for bit on {backend.actual_arch()} now: drop this xfail"
+        pytest.xfail("the device's compiler fused multiply-adds (within an ulp, checked above)")
     np.testing.assert_array_equal(got[:, 0], c)
     np.testing.assert_array_equal(got[:, 1], s)
 

@@ -7,6 +7,8 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 OUT    ?= out
+# make test's pytest workers: one per core, at most 4 (each is a Taichi process of ~1-2 GB)
+JOBS   ?= $(shell n=$$(nproc 2>/dev/null || echo 2); [ $$n -gt 4 ] && n=4; echo $$n)
 
 .PHONY: run test test-vulkan vulkan-device validate lint bench clean
 
@@ -25,11 +27,11 @@ run: $(STAMP)
 validate: $(STAMP)
 	$(BIN)/taichi-ice validate --dem --out $(OUT)/validation
 
-# The CPU suite; then one line on the Vulkan lane (`make test-vulkan`), which needs a Vulkan
+# The CPU suite (a worker per core: tests/conftest.py); then one line on the Vulkan lane (`make test-vulkan`), which needs a Vulkan
 # device (lavapipe, Mesa's software driver, counts: `apt-get install mesa-vulkan-drivers`).
 # The lane takes ~20 min on 2 cores, beyond make test's 15: .ci/run runs both.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(JOBS) --dist loadfile
 	@if $(BIN)/python tests/gpu_lane.py --check; then echo "Vulkan device found: make test-vulkan runs the GPU lane (CI runs it)"; \
 	else echo "Vulkan lane skipped: no Vulkan device here (apt-get install mesa-vulkan-drivers gives a software one; then make test-vulkan)"; fi
 

@@ -1,12 +1,16 @@
 """Test session set-up: one Taichi runtime for the whole session, on the arch asked for.
 
 Taichi compiles each kernel once per process, so every test module shares this runtime
-(float64 unless ``--precision f32``) and reuses compiled kernels.
+(float64 unless ``--precision f32``) and reuses compiled kernels. ``make test`` runs a
+pytest-xdist worker per core (at most 4), a file to a worker (``--dist loadfile``), so that a
+file's tests still share their kernels; most of a run is compiling, on one core a process.
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
+from pathlib import Path
 
 import pytest
 
@@ -34,3 +38,21 @@ def taichi_runtime(request: pytest.FixtureRequest) -> tuple[str, str]:
     precision = request.config.getoption("--precision")
     backend.init(arch, precision)
     return arch, precision
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Under pytest-xdist, write this worker's compiled kernels to Taichi's offline cache one
+    worker at a time. Taichi writes the cache as a process exits, under a lock it gives up on
+    after a few tries ("Lock .../ticache.lock failed"): the workers end together, and all but
+    one lost their kernels (measured: the next run compiled them again)."""
+    from taichi_ice import backend
+
+    if not os.environ.get("PYTEST_XDIST_WORKER") or backend.current() is None:
+        return
+    import taichi as ti
+
+    folder = Path(ti.lang.impl.current_cfg().offline_cache_file_path)
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / "taichi-ice-workers.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        ti.reset()  # Taichi ends its program here, writing its offline cache

@@ -114,6 +114,8 @@ def test_a_simulation_reuses_a_world_no_one_holds_and_steps_as_a_new_one(pool):
     scene = dem_scenes.collision(dem_scenes.OFFSET, "rate-state")
     reused = Simulation(scene, integrator="analytic")
     assert (pool.built, pool.reloaded) == (1, 1)
+    # Its kernels ran: a run on it compiles nothing, and its progress bar says so.
+    assert reused.world.compiled("sampled")
     fresh = Simulation(scene, integrator="analytic", worlds=World)
     for until in (0.002, 0.01):  # in the contact (touching at t = 0, 4.9 ms), and after
         for s in (reused, fresh):

@@ -42,3 +42,19 @@ def test_a_quiet_bar_writes_nothing(capsys):
     bar.update(5)
     bar.close()
     assert capsys.readouterr().err == ""
+
+
+def test_on_compiled_kernels_the_rate_counts_from_the_start(monkeypatch, capsys):
+    """A run on a World whose kernels ran (``World.compiled``), resumed at step 40 of 100:
+    nothing is said of compiling, and after 10 steps in 2 s the bar reports 5 steps/s and
+    10 s left (50 steps), from the run's first stride on."""
+    clock = Clock()
+    monkeypatch.setattr(progress._time, "perf_counter", clock)
+    bar = Progress(100, dt=0.01)
+    bar.every = 0.0
+    bar.compiling(compiled=True, step=40)
+    clock.now += 2.0
+    bar.update(50)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "compil" not in lines[0]
+    assert "5 steps/s" in lines[0] and "10 s left" in lines[0]

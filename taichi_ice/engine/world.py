@@ -214,6 +214,9 @@ class World:
             "energy": energy,
             "stepper": stepper,
             "team": team,
+            # What this World's kernels ran ("advance", "sampled"): those are compiled, for
+            # the next World on these fields too (``compiled``).
+            "launched": set(),
         }
 
     # ----------------------------------------------------------------------------------------
@@ -297,10 +300,17 @@ class World:
         """Advance every world by one time step."""
         self.advance(1)
 
+    def compiled(self, entry: str = "sampled") -> bool:
+        """Whether ``entry``'s kernels ran on these fields already in this process
+        (``"advance"``, or ``"sampled"``: ``advance_sampled``, a Simulation's), so that
+        running it compiles nothing: a World on the fields of one gone, or reloaded."""
+        return entry in self.launched
+
     def advance(self, n: int) -> None:
         """Advance every world by ``n`` time steps (no read-back: call ``check`` after)."""
         if n <= 0:
             return
+        self.launched.add("advance")
         if self.stepping == "worlds":
             plan = np.array([[n, NO_SAMPLE]], dtype=np.int32)
             self.stepper.launch(plan, *self._no_samples)
@@ -394,6 +404,7 @@ class World:
         rows = np.zeros((len(plan), self.layout.n_worlds, SAMPLE_COLUMNS))
         impulses = np.zeros((len(plan), max(self.layout.n_probes, 1), 2))
         if len(plan):
+            self.launched.add("sampled")
             if self.stepping == "worlds":
                 self.stepper.launch(plan, rows, impulses)
                 self.steps += int(plan[:, 0].sum())

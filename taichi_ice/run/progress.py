@@ -50,7 +50,9 @@ class Progress:
     The first stride of a run compiles the kernels of a new layout (seconds to a minute on
     2 cores; Taichi's offline cache makes it quicker the next time). The bar says so while it
     waits (``compiling``) and counts its rate and time left from the end of that first
-    stride, so that the compile time does not make the estimate of the rest wrong.
+    stride, so that the compile time does not make the estimate of the rest wrong. On a
+    World whose kernels ran already (``World.compiled``) it says nothing of compiling and
+    counts from the start.
     """
 
     def __init__(self, total: int, dt: float, enabled: bool = True, width: int = 30):
@@ -64,8 +66,12 @@ class Progress:
         self.tty = sys.stderr.isatty()
         self.every = 0.2 if self.tty else 15.0
 
-    def compiling(self) -> None:
-        """Say, before the first stride, that the kernels compile first."""
+    def compiling(self, compiled: bool = False, step: int = 0) -> None:
+        """Say, before the first stride, that the kernels compile first; or, ``compiled``,
+        that nothing compiles: the rate counts from now and ``step`` (where the run starts)."""
+        if compiled:
+            self.k0, self.t0 = step, _time.perf_counter()
+            return
         if self.enabled:
             sys.stderr.write(
                 "starting: the first stride compiles the kernels of a new layout "

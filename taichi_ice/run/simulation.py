@@ -354,7 +354,7 @@ class Simulation:
                 checkpoint.remove(ckpt_path)  # an earlier run's, stale for this one
             writers = [RunWriter(p, s, attrs) for p, s in zip(paths, self.scenes)]
         bar = Progress(n_end, self.dt, enabled=progress)
-        bar.compiling()
+        bar.compiling(self.world.compiled("sampled"), self.world.steps)
         start = _time.perf_counter()
         last_checkpoint = last_flush = _time.monotonic()
         status, failure, warning = "complete", "", ""

@@ -398,3 +398,31 @@ def test_a_second_sweep_on_a_folder_in_use_is_refused_and_a_stale_lock_is_taken_
     result = run_sweep(sweep, out, workers=0, progress=False)  # its holder is gone now
     assert not result.failed_batches
     assert not (out / "sweep.lock").exists()
+
+
+def test_a_short_batch_is_padded_only_to_the_capacity_of_the_largest(sweep_dir):
+    """Kernels compile for capacities: a batch shorter than the largest of its kind runs as
+    it is where its layout is the largest's (7 worlds of 23 bodies in 4 + 3: both take 4
+    worlds and 128 bodies), and else is padded to the fewest worlds that have that layout
+    (8 worlds in 7 + 1: the 1 to fewer than 7)."""
+    from taichi_ice.engine.assemble import assemble
+    from taichi_ice.engine.options import Options
+    from taichi_ice.experiments.sweep.plan import contact_slots, plan_batches
+    from taichi_ice.experiments.sweep.spec import world_scene
+
+    sweep = load_sweep(sweep_dir / "sweep.toml")
+    worlds = sweep.worlds()
+    slots = contact_slots(sweep)
+
+    def layout(case, n):
+        scene = world_scene(sweep.scene, case.overrides, case.seed, case.law)
+        return assemble([scene] * n, Options(slots=slots, force_dt=True)).layout
+
+    by4 = plan_batches(dataclasses.replace(sweep, batch_size=4), worlds[:7], workers=1)
+    assert [(len(b.worlds), b.pad) for b in by4] == [(4, 0), (3, 0)]
+    assert layout(worlds[6], 3) == layout(worlds[0], 4)
+    by7 = plan_batches(dataclasses.replace(sweep, batch_size=7), worlds, workers=1)
+    assert [len(b.worlds) for b in by7] == [7, 1]
+    last, pad = by7[1].worlds[-1], by7[1].pad
+    assert 0 < pad < 6
+    assert layout(last, 1 + pad) == layout(last, 7) != layout(last, pad)

@@ -6,8 +6,10 @@ worker needs to run each (plain data: it travels to other machines).
     specs = [batch_spec(sweep, b, None, "cpu", "f64", contact_slots(sweep)) for b in batches]
 
 Worlds that can share one ``World`` (the same law kind and theta integrator, ice, water and
-time step) go into the same batches; a batch shorter than the others of its layout may be
-padded with copies of its last world, where running them costs less than compiling the
+time step) go into the same batches. Kernels compile for capacities (``assemble.capacity``),
+so a batch shorter than the largest of its kind runs on that batch's World as it is when its
+layout is the same, and otherwise may be padded with copies of its last world up to the
+fewest worlds that have that layout, where running them costs less than compiling the
 kernels again (``COMPILE_SECONDS``). Every world is bit-identical alone and in any batch,
 so the plan changes the cost, never a result.
 
@@ -87,7 +89,11 @@ class PlannedBatch:
 
 
 def plan_batches(
-    sweep: Sweep, worlds: Sequence[Case], workers: int, arch: str = "cpu"
+    sweep: Sweep,
+    worlds: Sequence[Case],
+    workers: int,
+    arch: str = "cpu",
+    slots: int | None = None,
 ) -> list[PlannedBatch]:
     """Cut ``worlds`` into batches of worlds that can share one World.
 
@@ -96,11 +102,14 @@ def plan_batches(
     batches whose sizes differ by one at most.
 
     A worker compiles the kernels once per layout (``pool.WorldPool``), and a batch's layout
-    depends on its size: where a kind of batch (the law's kernels, the same scene settings)
-    has more batches than there are workers, a batch shorter than the largest of its kind
-    is padded with copies of its last world when running them costs less than compiling
-    (``COMPILE_SECONDS``, ``BODY_STEPS_PER_SECOND``). Each world is bit-identical in any
-    batch, so padding changes the cost, never a result.
+    depends on its size through the capacities: where a kind of batch (the law's kernels,
+    the same scene settings) has more batches than there are workers, a batch shorter than
+    the largest of its kind whose layout is not the largest's is padded with copies of its
+    last world, to the fewest worlds with that layout, when running them costs less than
+    compiling (``COMPILE_SECONDS``, ``BODY_STEPS_PER_SECOND``). Each world is bit-identical
+    in any batch, so padding changes the cost, never a result.
+
+    ``slots``: the contact slots every batch gets (``contact_slots``, computed if None).
     """
     groups: dict[str, list[Case]] = {}
     scenes: dict = {}
@@ -121,17 +130,55 @@ def plan_batches(
     largest: dict[str, int] = {}
     for kind, chunk in zip(kinds, chunks):
         largest[kind] = max(largest.get(kind, 0), len(chunk))
+    layouts = _Layouts(sweep, slots)
     batches = []
     for kind, chunk in zip(kinds, chunks):
-        pad = largest[kind] - len(chunk)
+        pad = 0
         # Only where a worker runs more than one batch of the kind; never a batch whose
         # runs are written (its files are its worlds').
         shared = kinds.count(kind) > max(workers, 1)
         written = chunk[-1].index in sweep.runs
-        if not shared or written or _pad_seconds(sweep, chunk, pad) > COMPILE_SECONDS:
-            pad = 0
+        if shared and not written and len(chunk) < largest[kind]:
+            pad = layouts.fewest_alike(chunk[-1], len(chunk), largest[kind]) - len(chunk)
+            if _pad_seconds(sweep, chunk, pad) > COMPILE_SECONDS:
+                pad = 0
         batches.append(PlannedBatch(tuple(chunk), pad))
     return batches
+
+
+class _Layouts:
+    """The layout of a batch of ``n`` copies of a sweep's world (memoised), as a worker
+    assembles it."""
+
+    def __init__(self, sweep: Sweep, slots: int | None):
+        self.sweep, self.slots, self.memo = sweep, slots, {}
+
+    def of(self, case: Case, n: int):
+        from ...engine.assemble import assemble
+        from ...engine.options import Options
+        from .spec import world_scene
+
+        if self.slots is None:
+            self.slots = contact_slots(self.sweep)
+        key = (case.overrides, repr(sorted(case.law.items())), n)
+        if key not in self.memo:
+            scene = world_scene(self.sweep.scene, case.overrides, case.seed, case.law)
+            options = Options(slots=self.slots, force_dt=True)
+            self.memo[key] = assemble([scene] * n, options).layout
+        return self.memo[key]
+
+    def fewest_alike(self, case: Case, n: int, largest: int) -> int:
+        """The fewest worlds from ``n`` to ``largest`` whose batch has the layout of
+        ``largest`` (capacities grow with the count: a bisection)."""
+        target = self.of(case, largest)
+        lo, hi = n, largest
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if self.of(case, mid) == target:
+                hi = mid
+            else:
+                lo = mid + 1
+        return lo
 
 
 def _pad_seconds(sweep: Sweep, chunk: Sequence[Case], pad: int) -> float:

@@ -312,8 +312,8 @@ def _run_sweep(sweep, out: Path, workers, scheduler, arch, precision, progress) 
     if missing:
         if scheduler is not None:
             n_workers = 0  # counted once connected
-        batches = plan_batches(sweep, missing, max(n_workers, 1), arch)
         slots = contact_slots(sweep)
+        batches = plan_batches(sweep, missing, max(n_workers, 1), arch, slots)
         specs = [batch_spec(sweep, b, runs_dir, arch, precision, slots) for b in batches]
         say = _Reporter(progress, len(specs), len(missing), len(reused))
         say.start(scheduler or (f"{n_workers} Dask workers" if n_workers else "this process"))

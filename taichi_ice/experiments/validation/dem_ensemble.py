@@ -39,6 +39,9 @@ from typing import Any
 
 import numpy as np
 
+from ..inference import holm
+from ..inference import mcnemar as _mcnemar_test
+
 LAYOUTS = 32
 UNTIL = 20.0  # s: the paper's run
 LAWS = ("coulomb", "rate-state")
@@ -117,18 +120,13 @@ def paired(base, other) -> dict[str, Any]:
 def mcnemar(base, other) -> dict[str, Any]:
     """Released (0/1) in two cases on the same layouts: counts and the exact McNemar p
     (two-sided binomial test of the discordant pairs at 1/2)."""
-    from scipy import stats
-
-    a, b = np.asarray(base, dtype=bool), np.asarray(other, dtype=bool)
-    only_base, only_other = int(np.sum(a & ~b)), int(np.sum(~a & b))
-    k = only_base + only_other
-    p = float(stats.binomtest(only_base, k, 0.5).pvalue) if k else 1.0
+    test = _mcnemar_test(base, other)
     return {
-        "base": int(a.sum()),
-        "other": int(b.sum()),
-        "only_base": only_base,
-        "only_other": only_other,
-        "p": p,
+        "base": test["a"],
+        "other": test["b"],
+        "only_base": test["only_a"],
+        "only_other": test["only_b"],
+        "p": test["p"],
     }
 
 
@@ -209,19 +207,6 @@ def compare(runs: list[dict], laws, comparisons) -> dict[str, Any]:
     for c in out.values():
         c["any_differs"] = any(c[m].get("differs", False) for m in (*MEASURES, "released"))
     return out
-
-
-def holm(p) -> list[float]:
-    """Holm's step-down adjusted p-values, in the order given."""
-    p = np.asarray(p, dtype=float)
-    order = np.argsort(p, kind="stable")
-    m = p.size
-    adjusted = np.empty(m)
-    running = 0.0
-    for rank, i in enumerate(order):
-        running = max(running, min(1.0, (m - rank) * p[i]))
-        adjusted[i] = running
-    return adjusted.tolist()
 
 
 def _shift(c: dict[str, Any]) -> str:

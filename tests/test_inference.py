@@ -1,0 +1,189 @@
+"""experiments.inference against SciPy and statsmodels (independent implementations, test-only
+dependencies) on seeded data, and against answers known in closed form. No Taichi."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from taichi_ice.experiments import inference
+
+SEED = 20261126
+
+
+def test_exact_intervals_of_the_study_s_proportions_are_the_closed_forms():
+    """k = 0 and k = n have closed forms: (alpha/2)^(1/n) and 1 - (alpha/2)^(1/n). 8 of 8
+    layouts jammed is [0.631, 1] and 0 of 16 is [0, 0.206] (issue 31's numbers), where a
+    percentile bootstrap gave [1, 1] and [0, 0]."""
+    low, high = inference.clopper_pearson(8, 8)
+    assert high == 1.0 and low == pytest.approx(0.025 ** (1 / 8), rel=1e-12)
+    assert round(low, 3) == 0.631
+    low, high = inference.clopper_pearson(0, 16)
+    assert low == 0.0 and high == pytest.approx(1 - 0.025 ** (1 / 16), rel=1e-12)
+    assert round(high, 3) == 0.206
+    assert inference.clopper_pearson(0, 0) == (0.0, 1.0)
+
+
+@pytest.mark.parametrize("confidence", [0.9, 0.95, 0.99])
+def test_clopper_pearson_and_wilson_equal_scipy_s(confidence):
+    rng = np.random.default_rng(SEED)
+    for n in (1, 2, 7, 16, 64, 300, 2000):
+        for k in sorted({0, n, *rng.integers(0, n + 1, 4).tolist()}):
+            ref = stats.binomtest(k, n).proportion_ci(confidence, method="exact")
+            got = inference.clopper_pearson(k, n, confidence)
+            assert got == pytest.approx((ref.low, ref.high), abs=1e-10), (k, n)
+            ref = stats.binomtest(k, n).proportion_ci(confidence, method="wilson")
+            got = inference.wilson(k, n, confidence)
+            assert got == pytest.approx((ref.low, ref.high), abs=1e-12), (k, n)
+
+
+def test_intervals_agree_with_statsmodels():
+    from statsmodels.stats.proportion import proportion_confint
+
+    for k, n in ((0, 16), (3, 16), (8, 8), (31, 64), (64, 64)):
+        for method, ours in (("beta", inference.clopper_pearson), ("wilson", inference.wilson)):
+            ref = proportion_confint(k, n, alpha=0.05, method=method)
+            assert ours(k, n) == pytest.approx(ref, abs=1e-10), (method, k, n)
+
+
+def test_the_exact_interval_covers_at_least_its_confidence():
+    """Clopper-Pearson's defining property, computed from the binomial law itself: for any
+    true p the probability that the interval holds p is at least 95 %."""
+    n = 24
+    intervals = [inference.clopper_pearson(k, n) for k in range(n + 1)]
+    for p in np.linspace(0.01, 0.99, 41):
+        pmf = inference.binomial_pmf(n, p)
+        covered = sum(pmf[k] for k, (lo, hi) in enumerate(intervals) if lo <= p <= hi)
+        assert covered >= 0.95 - 1e-12, p
+
+
+def test_binomial_test_equals_scipy_s():
+    rng = np.random.default_rng(SEED)
+    for n in (1, 5, 20, 101, 1000):
+        for p in (0.5, 0.3, 0.9):
+            for k in rng.integers(0, n + 1, 5):
+                ref = stats.binomtest(int(k), n, p).pvalue
+                assert inference.binomial_test(int(k), n, p) == pytest.approx(ref, rel=1e-9), (
+                    k,
+                    n,
+                    p,
+                )
+    assert inference.binomial_test(0, 0) == 1.0
+    with pytest.raises(ValueError, match="k = 5"):
+        inference.binomial_test(5, 4)
+
+
+def test_mcnemar_is_the_binomial_test_of_the_discordant_pairs():
+    """10 discordant pairs, all one way: p = 2 / 2^10 exactly; statsmodels' exact McNemar
+    on seeded paired outcomes gives the same p."""
+    from statsmodels.stats.contingency_tables import mcnemar
+
+    a = np.array([1] * 10 + [1] * 5 + [0] * 7, dtype=bool)
+    b = np.array([0] * 10 + [1] * 5 + [0] * 7, dtype=bool)
+    got = inference.mcnemar(a, b)
+    assert (got["only_a"], got["only_b"], got["a"], got["b"]) == (10, 0, 15, 5)
+    assert got["p"] == pytest.approx(2.0 / 2**10, rel=1e-12)
+    rng = np.random.default_rng(SEED)
+    for _ in range(20):
+        n = int(rng.integers(5, 80))
+        a = rng.random(n) < 0.5
+        b = np.where(rng.random(n) < 0.7, a, rng.random(n) < 0.6)
+        table = [[np.sum(a & b), np.sum(a & ~b)], [np.sum(~a & b), np.sum(~a & ~b)]]
+        ref = mcnemar(table, exact=True).pvalue
+        assert inference.mcnemar(a, b)["p"] == pytest.approx(ref, rel=1e-9)
+    assert inference.mcnemar([1, 0], [1, 0])["p"] == 1.0
+
+
+def test_sign_test_equals_statsmodels():
+    from statsmodels.stats.descriptivestats import sign_test
+
+    rng = np.random.default_rng(SEED)
+    for n in (6, 17, 40):
+        x = rng.normal(size=n)
+        y = x + rng.normal(0.3, 1.0, n)
+        y[:2] = x[:2]  # zero differences are dropped
+        got = inference.sign_test(x, y)
+        _, ref = sign_test(y - x, 0.0)
+        assert got["n"] == n - 2 and got["p"] == pytest.approx(ref, rel=1e-9)
+
+
+@pytest.mark.parametrize("n", [1, 4, 9, 20, 50])
+def test_exact_wilcoxon_equals_scipy_s(n):
+    rng = np.random.default_rng(SEED + n)
+    for _ in range(5):
+        x = rng.normal(size=n)
+        y = x + rng.normal(0.2, 1.0, n)
+        got = inference.wilcoxon(x, y)
+        ref = stats.wilcoxon(x, y, method="exact")
+        assert got["method"] == "exact"
+        assert got["statistic"] == ref.statistic
+        assert got["p"] == pytest.approx(ref.pvalue, rel=1e-9)
+
+
+def test_wilcoxon_of_eight_positive_differences_is_2_over_2_to_the_8():
+    got = inference.wilcoxon(np.arange(1.0, 9.0))
+    assert got["statistic"] == 0.0 and got["p"] == pytest.approx(2.0 / 2**8, rel=1e-12)
+
+
+def test_normal_wilcoxon_with_ties_equals_scipy_s():
+    rng = np.random.default_rng(SEED)
+    for n in (30, 80, 300):
+        d = np.round(rng.normal(0.3, 1.0, n), 1)  # ties, and some zeros
+        got = inference.wilcoxon(d, exact=False)
+        ref = stats.wilcoxon(d, method="approx", zero_method="wilcox", correction=False)
+        assert got["method"] == "normal" and got["n"] == int(np.sum(d != 0))
+        assert got["statistic"] == pytest.approx(ref.statistic, rel=1e-12)
+        assert got["p"] == pytest.approx(ref.pvalue, rel=1e-9)
+    with pytest.raises(ValueError, match="without ties"):
+        inference.wilcoxon([1.0, 1.0, -2.0], exact=True)
+
+
+def test_holm_equals_statsmodels():
+    from statsmodels.stats.multitest import multipletests
+
+    rng = np.random.default_rng(SEED)
+    for m in (1, 3, 17, 40):
+        p = rng.random(m) ** 3
+        p[: m // 4] = p[0]  # ties
+        ref = multipletests(p, alpha=0.05, method="holm")[1]
+        assert inference.holm(p) == pytest.approx(ref.tolist(), rel=1e-12, abs=1e-15)
+    # By hand: sorted 0.01, 0.02, 0.04 of 3 -> 0.03, 0.04, 0.04 (monotone).
+    assert inference.holm([0.04, 0.01, 0.02]) == pytest.approx([0.04, 0.03, 0.04])
+
+
+def test_kaplan_meier_equals_statsmodels():
+    from statsmodels.duration.survfunc import SurvfuncRight
+
+    rng = np.random.default_rng(SEED)
+    for n in (5, 32, 200):
+        t = np.round(rng.exponential(8.0, n), 1)  # tied times
+        observed = t < 20.0
+        t = np.minimum(t, 20.0)  # censored at the run's end, 20 s
+        got = inference.kaplan_meier(t, observed)
+        ref = SurvfuncRight(t, observed.astype(int))
+        assert got["times"] == pytest.approx(ref.surv_times.tolist())
+        assert got["survival"] == pytest.approx(ref.surv_prob.tolist(), rel=1e-12)
+        assert got["se"] == pytest.approx(ref.surv_prob_se.tolist(), rel=1e-9, abs=1e-15)
+        assert got["at_risk"] == ref.n_risk.astype(int).tolist()
+        # The median is the first time at which survival is 0.5 or below (Klein &
+        # Moeschberger); statsmodels' quantile takes SAS's strict "below", which differs
+        # where survival sits at exactly 0.5: read it from statsmodels' curve.
+        below = np.flatnonzero(ref.surv_prob <= 0.5 + 1e-12)
+        assert (got["median"] is None) == (below.size == 0)
+        if below.size:
+            assert got["median"] == pytest.approx(ref.surv_times[below[0]])
+
+
+def test_kaplan_meier_without_censoring_is_the_empirical_survival():
+    t = np.array([3.0, 1.0, 2.0, 2.0, 5.0])
+    got = inference.kaplan_meier(t, np.ones(5, dtype=bool))
+    assert got["times"] == [1.0, 2.0, 3.0, 5.0]
+    assert got["survival"] == pytest.approx([0.8, 0.4, 0.2, 0.0])
+    assert got["median"] == 2.0
+    all_censored = inference.kaplan_meier([20.0, 20.0], [False, False])
+    assert all_censored["times"] == [] and all_censored["median"] is None
+    with pytest.raises(ValueError, match="finite"):
+        inference.kaplan_meier([1.0, math.inf], [True, False])

@@ -187,3 +187,51 @@ def test_kaplan_meier_without_censoring_is_the_empirical_survival():
     assert all_censored["times"] == [] and all_censored["median"] is None
     with pytest.raises(ValueError, match="finite"):
         inference.kaplan_meier([1.0, math.inf], [True, False])
+
+
+def test_mcnemar_power_is_the_sum_over_every_outcome_of_scipy_s_test():
+    """The exact power of the exact McNemar test, against a sum over every outcome (the
+    discordant count m and its split j) of the probability of the outcomes SciPy's
+    binomial test rejects."""
+    n, only_a, only_b = 30, 0.3, 0.1
+    want = 0.0
+    for m in range(1, n + 1):
+        p_m = stats.binom.pmf(m, n, only_a + only_b)
+        for j in range(m + 1):
+            if stats.binomtest(j, m, 0.5).pvalue <= 0.05:
+                want += p_m * stats.binom.pmf(j, m, only_a / (only_a + only_b))
+    assert inference.mcnemar_power(n, only_a, only_b) == pytest.approx(want, rel=1e-9)
+    assert inference.mcnemar_power(n, 0.2, 0.2) <= 0.05  # no effect: at most alpha
+
+
+def test_mcnemar_pairs_is_the_fewest_that_reach_the_power():
+    n = inference.mcnemar_pairs(0.25, 0.05)
+    assert (
+        inference.mcnemar_power(n, 0.25, 0.05) >= 0.8 > inference.mcnemar_power(n - 1, 0.25, 0.05)
+    )
+    # Simulated with the test itself: 2,000 sets of n pairs, rejected at the rate found.
+    rng = np.random.default_rng(SEED)
+    draws = rng.multinomial(n, [0.25, 0.05, 0.7], size=2000)
+    rejected = np.mean([inference.binomial_test(int(a), int(a + b)) <= 0.05 for a, b, _ in draws])
+    power = inference.mcnemar_power(n, 0.25, 0.05)
+    assert abs(rejected - power) < 4 * math.sqrt(power * (1 - power) / 2000)
+    assert inference.mcnemar_pairs(0.1, 0.1) is None  # no effect, no n
+
+
+def test_paired_pairs_of_the_t_test_agree_with_statsmodels():
+    from statsmodels.stats.power import TTestPower
+
+    for d in (0.2, 0.35, 0.5, 0.8, 1.2):
+        ref = TTestPower().solve_power(effect_size=d, alpha=0.05, power=0.8)
+        assert abs(inference.paired_pairs(d, 1.0, test="t") - math.ceil(ref)) <= 1, d
+
+
+def test_paired_pairs_of_the_wilcoxon_test_reach_the_power_in_simulation():
+    """Normal differences of mean 0.5 sd: at the n found, the Wilcoxon test (ours, held to
+    SciPy's above) rejects in 80 % of 1,000 simulated studies, within 4 standard errors."""
+    n = inference.paired_pairs(0.5, 1.0)
+    rng = np.random.default_rng(SEED)
+    rejected = np.mean(
+        [inference.wilcoxon(rng.normal(0.5, 1.0, n))["p"] <= 0.05 for _ in range(1000)]
+    )
+    assert abs(rejected - 0.8) < 4 * math.sqrt(0.8 * 0.2 / 1000), (n, rejected)

@@ -402,7 +402,7 @@ def test_a_second_sweep_on_a_folder_in_use_is_refused_and_a_stale_lock_is_taken_
 
 def test_a_short_batch_is_padded_only_to_the_capacity_of_the_largest(sweep_dir):
     """Kernels compile for capacities: a batch shorter than the largest of its kind runs as
-    it is where its layout is the largest's (7 worlds of 23 bodies in 4 + 3: both take 4
+    it is where its layout is the largest's (7 worlds of 25 bodies in 4 + 3: both take 4
     worlds and 128 bodies), and else is padded to the fewest worlds that have that layout
     (8 worlds in 7 + 1: the 1 to fewer than 7)."""
     from taichi_ice.engine.assemble import assemble

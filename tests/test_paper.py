@@ -280,3 +280,60 @@ def test_energy_created_from_nothing_stops_the_run(run_opts):
     fine = energies.copy()
     fine[0, SERIES_ENERGY.index("kinetic_energy")] += 0.4 * came_in
     sim._check_budget(fine)
+
+
+def _force_series(t: np.ndarray, magnitude: np.ndarray) -> dict:
+    zeros = np.zeros_like(t)
+    force = np.zeros((t.size, 1, 2))
+    force[:, 0, 0] = magnitude
+    return {
+        "time": t,
+        "probe_force": force,
+        "friction_energy": t,
+        "viscous_energy": zeros,
+        "drag_energy": zeros,
+        "work_in": t,
+        "kinetic_energy": zeros,
+        "elastic_energy": zeros,
+    }
+
+
+def test_release_time_and_jammed_fraction_of_a_synthetic_jam():
+    """A 15 kN jam from 2 s to 8 s with a 25 kN peak at 5 s, 20 s sampled every 0.01 s. The
+    mean over the second before a sample falls below a tenth of the peak (2.5 kN) once at
+    most 16 of its 101 samples are still at 15 kN: at 8.84 s, 3.84 s after the peak. Above
+    10 kN and 5 kN for 600 of the 2,000 samples after t = 0, above 20 kN for one."""
+    t = np.round(np.linspace(0.0, 20.0, 2001), 10)
+    f = np.where((t >= 2.0) & (t < 8.0), 15e3, 0.0)
+    f[t == 5.0] = 25e3
+    m = run_metrics(_force_series(t, f))
+    assert m["release_observed"] == 1.0 and m["release_time"] == pytest.approx(3.84, abs=1e-9)
+    assert m["jammed_fraction"] == pytest.approx(0.3) and m["jammed_fraction_5kN"] == 0.3
+    assert m["jammed_fraction_20kN"] == pytest.approx(0.0005)
+    held = np.where(t >= 2.0, 15e3, 0.0)
+    held[t == 5.0] = 25e3
+    m = run_metrics(_force_series(t, held))  # held to the end: censored at 20 s
+    assert m["release_observed"] == 0.0 and m["release_time"] == pytest.approx(15.0)
+    assert m["released"] == 0.0
+    m = run_metrics(_force_series(t, np.zeros_like(t)))
+    assert math.isnan(m["release_time"]) and m["release_observed"] == 0.0
+    assert m["jammed_fraction"] == 0.0
+
+
+def test_a_run_released_at_its_end_has_its_release_observed():
+    """``released`` is the release rule at the last sample: wherever it holds, the release
+    time is observed, no later than the end (random jams that break or hold)."""
+    rng = np.random.default_rng(7)
+    t = np.linspace(0.0, 10.0, 501)
+    seen = set()
+    for _ in range(200):
+        start, end = np.sort(rng.uniform(0.0, 11.0, 2))
+        f = np.where((t >= start) & (t < end), rng.uniform(1e3, 3e4), 0.0) + rng.uniform(
+            0.0, 300.0, t.size
+        )
+        m = run_metrics(_force_series(t, f))
+        seen.add(m["released"])
+        if m["released"]:
+            assert m["release_observed"] == 1.0
+            assert 0.0 <= m["release_time"] <= 10.0 - t[np.argmax(f)] + 1e-12
+    assert seen == {0.0, 1.0}

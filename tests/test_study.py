@@ -138,5 +138,19 @@ def test_report_writes_figures_json_and_markdown(tmp_path):
         0.872 + (0.05 - 0.112) * np.log(0.1 / 1e-5)
     )
     json.dumps(summary)  # serialisable
+    # Every world's values, as in the dataset, with its model, area fraction and seed.
+    ds = synthetic(layouts=4)
+    rows = summary["per_world"]
+    assert len(rows) == ds.sizes["world"]
+    key = study.FIELD
+    for w in range(ds.sizes["world"]):
+        law, seed = str(ds["law"].values[w]), int(ds["seed"].values[w])
+        fraction = float(ds[f"field.{key}.area_fraction"].values[w])
+        (row,) = [
+            r for r in rows if (r["model"], r["seed"], r["area_fraction"]) == (law, seed, fraction)
+        ]
+        assert row["peak_force"] == ds["peak_force"].values[w]
+        assert row["released"] == ds["released"].values[w]
+        assert row["jam"] == float(ds["peak_force"].values[w] > study.JAM_FORCE)
     md = study_report.study_markdown(summary)
     assert "| mu0.9 |" in md and "carried by" in md and "100 world-steps/s" in md

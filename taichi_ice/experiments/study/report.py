@@ -96,6 +96,23 @@ def run_study(
     return summary
 
 
+def per_world(table: dict) -> list[dict]:
+    """Every world's values, so that a reader can recompute each verdict: its model, area
+    fraction and seed, its metrics and its jam (``jam``, ``broken``, ``held``); NaN (a world
+    that did not complete, or ``broken`` without a jam) written as None."""
+    rows = []
+    for model, cells in table.items():
+        for fraction, cell in cells.items():
+            names = [k for k in cell if k != "seed"]
+            for i, seed in enumerate(cell["seed"]):
+                row = {"model": model, "area_fraction": fraction, "seed": int(seed)}
+                for k in names:
+                    v = float(cell[k][i])
+                    row[k] = v if math.isfinite(v) else None
+                rows.append(row)
+    return rows
+
+
 def study_report(ds, out, *, scene, layouts, until, runs, arch, precision) -> dict:
     """The study's summary (study.json's content, but its wall time) and figures (into
     ``out/figures``) from the sweep's dataset ``ds``; ``runs`` is the sweep's log."""
@@ -133,6 +150,7 @@ def study_report(ds, out, *, scene, layouts, until, runs, arch, precision) -> di
         "summary": summarise(table),
         "claims": claim_list,
         "carriers": carriers(claim_list),
+        "per_world": per_world(table),
     }
     figures = out / "figures"
     figures.mkdir(parents=True, exist_ok=True)

@@ -41,6 +41,8 @@ import math
 
 import numpy as np
 
+from ..metrics import JAM_FORCE
+
 # The models of the study, in the order of its tables: (label, [[law]] table).
 MODELS = [
     ("mu0.1", {"law": "coulomb", "mu": 0.1}),
@@ -63,8 +65,7 @@ RATE_STATE_ROLES = {
 AREA_FRACTIONS = (0.70, 0.775, 0.85)
 FIELD = "rubble"
 # A jam: the pillar force exceeds ten times the paper's bound for blocks that "slide easily
-# past the pillar" (mu = 0.1: "forces never higher than 1 kN").
-JAM_FORCE = 10e3  # N
+# past the pillar" (mu = 0.1: "forces never higher than 1 kN"): metrics.JAM_FORCE, 10 kN.
 FREE_FORCE = 1e3  # N: the paper's "never higher than 1 kN"
 # Layouts of the default study: what a 2-core machine runs in about 10 minutes (measured,
 # see README: about 24 worlds x 20 s per layout).

@@ -4,6 +4,7 @@ claims and their carriers on a dataset whose answers are known; the report it wr
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -154,3 +155,42 @@ def test_report_writes_figures_json_and_markdown(tmp_path):
         assert row["jam"] == float(ds["peak_force"].values[w] > study.JAM_FORCE)
     md = study_report.study_markdown(summary)
     assert "| mu0.9 |" in md and "carried by" in md and "100 world-steps/s" in md
+
+
+def test_the_docs_script_recomputes_the_jams_from_study_json(tmp_path, capsys):
+    """docs/study/recompute.py reads per_world alone: its jam counts are the summary's, with
+    the exact interval (12 of 12: [0.735, 1]); mu = 0.9 holds every jam that rate-and-state
+    releases, on 12 layouts of each area fraction (McNemar p = 2 / 2^12)."""
+    import importlib.util
+
+    from taichi_ice.scene.parse import load_scenario
+
+    summary = study_report.study_report(
+        synthetic(layouts=12),
+        tmp_path,
+        scene=load_scenario("pillar"),
+        layouts=12,
+        until=20.0,
+        runs=[],
+        arch="cpu",
+        precision="f64",
+    )
+    path = tmp_path / "study.json"
+    path.write_text(json.dumps(summary))
+    spec = importlib.util.spec_from_file_location(
+        "recompute", Path(__file__).resolve().parents[1] / "docs" / "study" / "recompute.py"
+    )
+    recompute = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(recompute)
+    cells = recompute.strata(summary["per_world"])
+    for model, fraction, k, n, low, high in recompute.jam_table(cells):
+        want = summary["summary"][model]["by_fraction"][f"{fraction:g}"]["jam"]["value"]
+        assert (k / n, n) == (want, 12)
+        if k == n:
+            assert (round(low, 3), high) == (0.735, 1.0)
+    pairs = recompute.paired(cells, "mu0.9", "rate-state", "held")
+    assert [f for f, *_ in pairs] == [0.7, 0.85]
+    for _, n, only_a, only_b, p in pairs:
+        assert (n, only_a, only_b) == (12, 12, 0) and p == pytest.approx(2.0 / 2**12)
+    assert recompute.main([str(path)]) == 0
+    assert "rate-state against mu0.9" in capsys.readouterr().out

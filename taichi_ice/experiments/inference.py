@@ -34,10 +34,12 @@ __all__ = [
     "clopper_pearson",
     "holm",
     "kaplan_meier",
+    "ks_2samp",
     "mcnemar",
     "mcnemar_pairs",
     "mcnemar_power",
     "paired_pairs",
+    "quantile_shift",
     "sign_test",
     "wilcoxon",
     "wilson",
@@ -325,3 +327,83 @@ def paired_pairs(
     elif test != "t":
         raise ValueError(f'paired_pairs: test must be "t" or "wilcoxon", not {test!r}')
     return math.ceil(n)
+
+
+# --------------------------------------------------------------------------------------------
+# Two distributions: the same layouts at two steps (issue 31's step bias)
+# --------------------------------------------------------------------------------------------
+
+
+def ks_2samp(x, y) -> dict:
+    """The two-sample Kolmogorov-Smirnov test, two-sided, exact: ``D``, the largest gap
+    between the two empirical distribution functions, and the probability that two samples
+    of these sizes from one continuous law differ by ``D`` or more (a walk over the merged
+    order that stays inside the band ``|i/n - j/m| < D``; Hodges 1957). NaNs are dropped.
+
+    Returns ``{"n", "m", "statistic", "p"}``.
+    """
+    x = np.sort(np.asarray(x, dtype=float)[np.isfinite(np.asarray(x, dtype=float))])
+    y = np.sort(np.asarray(y, dtype=float)[np.isfinite(np.asarray(y, dtype=float))])
+    n, m = x.size, y.size
+    if n == 0 or m == 0:
+        raise ValueError(f"ks_2samp: samples of {n} and {m} values")
+    grid = np.concatenate([x, y])
+    gap = np.abs(
+        np.searchsorted(x, grid, side="right") * m - np.searchsorted(y, grid, side="right") * n
+    )
+    h = int(gap.max())  # D n m, an integer
+    # inside[j]: probability that a uniform walk over the merged order reached (i, j) without
+    # leaving the band |i m - j n| < h; a step takes an x with probability (n - i) / rest.
+    inside = np.zeros(m + 1)
+    inside[0] = 1.0
+    for j in range(1, m + 1):  # the first row: j values of y, none of x
+        inside[j] = inside[j - 1] * (m - j + 1) / (n + m - j + 1) if j * n < h else 0.0
+    for i in range(1, n + 1):
+        new = np.zeros(m + 1)
+        for j in range(m + 1):
+            if abs(i * m - j * n) >= h:
+                continue
+            rest = n + m - i - j
+            from_x = inside[j] * (n - i + 1) / (rest + 1)
+            from_y = new[j - 1] * (m - j + 1) / (rest + 1) if j > 0 else 0.0
+            new[j] = from_x + from_y
+        inside = new
+    return {
+        "n": n,
+        "m": m,
+        "statistic": h / (n * m),
+        "p": float(min(1.0, max(0.0, 1.0 - inside[m]))),
+    }
+
+
+def quantile_shift(
+    base,
+    other,
+    quantiles=(0.1, 0.5, 0.9),
+    confidence: float = 0.95,
+    resamples: int = 10_000,
+    seed: int = 0,
+) -> list[dict]:
+    """The shift of ``other``'s quantiles from ``base``'s, for paired values (the same
+    layouts in two runs: unit i is ``base[i]``, ``other[i]``), with percentile bootstrap
+    intervals that resample the units (pairs with a NaN dropped).
+
+    Returns ``[{"q", "shift", "low", "high"}]``, one per quantile.
+    """
+    a, b = np.asarray(base, dtype=float), np.asarray(other, dtype=float)
+    if a.shape != b.shape:
+        raise ValueError(f"quantile_shift: paired values of shapes {a.shape} and {b.shape}")
+    keep = np.isfinite(a) & np.isfinite(b)
+    a, b = a[keep], b[keep]
+    if a.size == 0:
+        raise ValueError("quantile_shift: no pair with both values")
+    qs = np.asarray(quantiles, dtype=float)
+    rows = np.random.default_rng(seed).integers(0, a.size, size=(resamples, a.size))
+    shifts = np.quantile(b[rows], qs, axis=1) - np.quantile(a[rows], qs, axis=1)
+    tail = (1.0 - confidence) / 2.0
+    low, high = np.quantile(shifts, [tail, 1.0 - tail], axis=1)
+    point = np.quantile(b, qs) - np.quantile(a, qs)
+    return [
+        {"q": float(q), "shift": float(s), "low": float(lo), "high": float(hi)}
+        for q, s, lo, hi in zip(qs, point, low, high)
+    ]

@@ -114,21 +114,26 @@ def test_claims_and_carriers_on_a_dataset_with_known_answers():
     assert p["value"] == 1.0 and p["n"] == 24
 
 
-def test_report_writes_figures_json_and_markdown(tmp_path):
-    """The report of a study: three figures, study.json with every model, study.md tables."""
+def _report(out, layouts: int, runs=()) -> dict:
+    """The report of the synthetic study of ``layouts`` layouts, into ``out``."""
     from taichi_ice.scene.parse import load_scenario
 
-    runs = [{"workers": 2, "scheduler": None, "wall_time": 10.0, "world_steps": 1000}]
-    summary = study_report.study_report(
-        synthetic(layouts=4),
-        tmp_path,
+    return study_report.study_report(
+        synthetic(layouts=layouts),
+        out,
         scene=load_scenario("pillar"),
-        layouts=4,
+        layouts=layouts,
         until=20.0,
-        runs=runs,
+        runs=list(runs),
         arch="cpu",
         precision="f64",
     )
+
+
+def test_report_writes_figures_json_and_markdown(tmp_path):
+    """The report of a study: three figures, study.json with every model, study.md tables."""
+    runs = [{"workers": 2, "scheduler": None, "wall_time": 10.0, "world_steps": 1000}]
+    summary = _report(tmp_path, 4, runs)
     summary["wall_time"] = 11.0
     for name in ("study_distributions", "study_jam_vs_mu", "study_phase_map"):
         assert (tmp_path / "figures" / f"{name}.png").stat().st_size > 20_000
@@ -163,18 +168,7 @@ def test_the_docs_script_recomputes_the_jams_from_study_json(tmp_path, capsys):
     releases, on 12 layouts of each area fraction (McNemar p = 2 / 2^12)."""
     import importlib.util
 
-    from taichi_ice.scene.parse import load_scenario
-
-    summary = study_report.study_report(
-        synthetic(layouts=12),
-        tmp_path,
-        scene=load_scenario("pillar"),
-        layouts=12,
-        until=20.0,
-        runs=[],
-        arch="cpu",
-        precision="f64",
-    )
+    summary = _report(tmp_path, 12)
     path = tmp_path / "study.json"
     path.write_text(json.dumps(summary))
     spec = importlib.util.spec_from_file_location(

@@ -204,6 +204,29 @@ def test_mcnemar_power_is_the_sum_over_every_outcome_of_scipy_s_test():
     assert inference.mcnemar_power(n, 0.2, 0.2) <= 0.05  # no effect: at most alpha
 
 
+@pytest.mark.parametrize(
+    "n, p, p0", [(30, 0.75, 0.5), (57, 0.3, 0.5), (200, 0.45, 0.5), (13, 0.9, 0.6)]
+)
+def test_binomial_power_is_the_mass_of_what_scipy_s_test_rejects(n, p, p0):
+    """The exact power of the exact binomial test: the probability under p of every count
+    SciPy's binomtest rejects at 0.05."""
+    rejected = [k for k in range(n + 1) if stats.binomtest(k, n, p0).pvalue <= 0.05]
+    want = float(stats.binom.pmf(rejected, n, p).sum())
+    assert inference.binomial_power(n, p, p0) == pytest.approx(want, rel=1e-9)
+
+
+def test_binomial_n_is_the_first_n_that_reaches_the_power():
+    """n for 80 % power: reached at n, not at n - 1 (the power is not monotone in n, so the
+    first n is the claim); in the normal approximation's range for p far from p0."""
+    for p in (0.75, 0.3, 0.9):
+        n = inference.binomial_n(p)
+        assert inference.binomial_power(n, p) >= 0.8
+        assert all(inference.binomial_power(m, p) < 0.8 for m in range(1, n))
+        z = stats.norm.ppf(0.975) * 0.5 + stats.norm.ppf(0.8) * math.sqrt(p * (1 - p))
+        assert 0.6 * (z / (p - 0.5)) ** 2 < n < 1.6 * (z / (p - 0.5)) ** 2
+    assert inference.binomial_n(0.5) is None  # no effect, no n
+
+
 def test_mcnemar_pairs_is_the_fewest_that_reach_the_power():
     n = inference.mcnemar_pairs(0.25, 0.05)
     assert (

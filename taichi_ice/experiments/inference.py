@@ -29,7 +29,9 @@ from statistics import NormalDist
 import numpy as np
 
 __all__ = [
+    "binomial_n",
     "binomial_pmf",
+    "binomial_power",
     "binomial_test",
     "clopper_pearson",
     "holm",
@@ -289,6 +291,38 @@ def mcnemar_power(n: int, only_a: float, only_b: float, alpha: float = 0.05) -> 
         p_value[2 * j == m] = 1.0
         power += p_m * float(binomial_pmf(m, share)[p_value <= alpha].sum())
     return power
+
+
+def binomial_power(n: int, p: float, p0: float = 0.5, alpha: float = 0.05) -> float:
+    """The power of the two-sided exact binomial test (``binomial_test``) of ``p0`` at
+    ``alpha`` with ``n`` trials whose true probability is ``p``: exact, the probability under
+    ``p`` of every count the test rejects."""
+    if n == 0:
+        return 0.0
+    # binomial_test(k, n, p0) for every k at once: the mass of the outcomes no more likely.
+    null = binomial_pmf(n, p0)
+    order = np.sort(null)
+    p_value = np.cumsum(order)[np.searchsorted(order, null * _AS_LIKELY, side="right") - 1]
+    return float(binomial_pmf(n, p)[np.minimum(1.0, p_value) <= alpha].sum())
+
+
+def binomial_n(
+    p: float, p0: float = 0.5, alpha: float = 0.05, power: float = 0.8, most: int = 20_000
+) -> int | None:
+    """The fewest trials at which the exact binomial test of ``p0`` reaches ``power`` when
+    the true probability is ``p`` (``binomial_power``; its power is not monotone in n, so the
+    first n that reaches it); None if ``p == p0`` or beyond ``most``."""
+    if p == p0:
+        return None
+    nd = NormalDist()
+    za, zb = nd.inv_cdf(1.0 - alpha / 2.0), nd.inv_cdf(power)
+    guess = ((za * math.sqrt(p0 * (1 - p0)) + zb * math.sqrt(p * (1 - p))) / (p - p0)) ** 2
+    n = max(1, int(guess / 2))
+    while n <= most:
+        if binomial_power(n, p, p0, alpha) >= power:
+            return n
+        n += 1 if n < 400 else max(1, n // 200)
+    return None
 
 
 def mcnemar_pairs(

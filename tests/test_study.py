@@ -1,5 +1,6 @@
-"""The study's statistics: the bootstrap CI against SciPy and the normal closed form; the
-claims and their carriers on a dataset whose answers are known; the report it writes."""
+"""The study (issue 31): its design (strata with their own layouts, the half step, the
+strengths), its statistics on a study whose answers are set, its report (study.json,
+study.md, study.nc, figures), the docs' recompute script, and a short study run end to end."""
 
 from __future__ import annotations
 
@@ -10,13 +11,16 @@ import numpy as np
 import pytest
 import scipy.stats
 
+from taichi_ice.experiments.study import design as study_design
 from taichi_ice.experiments.study import report as study_report
 from taichi_ice.experiments.study import stats as study
-from taichi_ice.experiments.study.stats import MODELS, bootstrap_ci, verdict
+from taichi_ice.experiments.study.design import MODELS, Arm, design
+from taichi_ice.experiments.study.stats import bootstrap_ci, verdict
 
 # Two independent Monte Carlo resamplings of the same data agree on a 95 % quantile to about
 # this fraction of the standard error (4,000 and 20,000 resamples).
 MC_TOLERANCE = 0.08
+LAYOUTS = 16
 
 
 def test_bootstrap_ci_matches_scipy_and_the_normal_closed_form():
@@ -43,148 +47,258 @@ def test_bootstrap_of_a_constant_and_of_nothing():
 
 
 def test_verdicts():
-    """Holds, contradicted or undecided by where the interval lies against zero."""
-    assert verdict(0.1, 0.3, +1) == "holds"
-    assert verdict(-0.3, -0.1, +1) == "contradicted"
-    assert verdict(-0.3, -0.1, -1) == "holds"
-    assert verdict(-0.1, 0.2, -1) == "undecided"
+    """Holds or contradicted only when the adjusted p is at most alpha, by the effect's side."""
+    assert verdict(0.01, 0.3, +1) == "holds"
+    assert verdict(0.01, -0.3, +1) == "contradicted"
+    assert verdict(0.01, -0.3, -1) == "holds"
+    assert verdict(0.2, -0.3, -1) == "undecided"
+    assert verdict(0.01, 0.0, -1) == "undecided"
 
 
-def synthetic(layouts: int = 12, fractions=(0.7, 0.85)):
-    """A study dataset whose answers are set: mu >= 0.5 jams and holds, mu < 0.5 never jams;
-    rate-state and the steady-state law jam and break, memory-only jams and holds (so the
-    release is carried by rate); concentration lower under rate-state than mu = 0.5 only."""
+def test_design_gives_each_stratum_its_own_layouts_and_pairs_the_half_step():
+    """No seed is shared between strata; the half step and the strengths run the first
+    layouts of their stratum (paired); every arm's sweep runs the eight models on its seeds
+    with its own area fraction, step and strength; the issue's sizes at --layouts 64."""
+    arms = {a.name: a for a in design(64)}
+    strata = [a for a in arms.values() if a.kind in ("stratum", "control")]
+    seen = [set(a.seeds) for a in strata]
+    assert all(not (s & t) for i, s in enumerate(seen) for t in seen[i + 1 :])
+    assert [a.layouts for a in strata] == [64, 64, 32]
+    step = arms["half-step-af0.85"]
+    assert step.seeds == arms["af0.85"].seeds[:32]
+    assert step.dt_safety == pytest.approx(study_design.DEFAULT_SAFETY / 2)
+    for s in study_design.STRENGTHS:
+        for f in study_design.STRATA:
+            arm = arms[f"strength-{s / 1e6:g}MPa-af{f:g}"]
+            assert arm.strength == s and arm.seeds == arms[f"af{f:g}"].seeds[:32]
+    for arm in (step, arms["strength-3MPa-af0.775"], arms["control-af0.7"]):
+        sweep = arm.sweep(until=1.0)
+        assert len(sweep.worlds()) == 8 * arm.layouts and sweep.until == 1.0
+        scene = sweep.scene_for(sweep.worlds()[0])
+        assert scene.ice.crushing_strength == arm.strength
+        assert scene.simulation.dt_safety == (arm.dt_safety or study_design.DEFAULT_SAFETY)
+    assert [a.name for a in design(2, 0, 0, 0)] == ["af0.85", "af0.775"]
+    with pytest.raises(ValueError, match="not a stratum"):
+        study_design.stratum_seeds(0.5, 3)
+
+
+def _dataset(arm: Arm, shift: float = 1.0):
+    """A sweep dataset for ``arm`` whose answers are set: mu <= 0.3 never touches 1 kN;
+    mu >= 0.5 jams and holds to the end; rate-state and the steady-state law jam and release
+    2 s after the peak, jammed a tenth of the time; memory-only jams and holds as mu = 0.9;
+    rate-state dissipates more steadily than mu = 0.5. ``shift`` scales rate-state's
+    frictional energy (the step's bias)."""
     import xarray as xr
 
     rows = []
-    for label, _ in MODELS:
-        for f in fractions:
-            for seed in range(layouts):
-                jam = label in ("mu0.5", "mu0.7", "mu0.9") or label in (
-                    "rate-state",
-                    "steady-state",
-                    "memory-only",
-                )
-                broken = label in ("rate-state", "steady-state")
-                peak = 2e6 + 1e4 * seed if jam else 500.0 + seed
-                if label in ("rate-state", "steady-state"):
-                    peak = 5e5 + 1e4 * seed
-                conc = 0.3 if label == "rate-state" else 0.6
-                rows.append((label, f, seed, peak, float(broken or not jam), conc))
-    label, f, seed, peak, released, conc = map(np.array, zip(*rows))
+    for label, table in MODELS:
+        for seed in arm.seeds:
+            i = seed % study_design.SEED_BLOCK
+            releases = label in ("rate-state", "steady-state")
+            jams = label not in ("mu0.1", "mu0.3")
+            peak = (5e5 if releases else 2e6) + 1e4 * i if jams else 500.0 + i
+            energy = peak / 10 * (shift if label == "rate-state" else 1.0)
+            conc = 0.3 + 0.001 * i if label == "rate-state" else 0.6
+            rows.append(
+                {
+                    "law": label,
+                    "seed": seed,
+                    "mu": table.get("mu", np.nan),
+                    "peak_force": peak,
+                    "friction_energy": energy,
+                    "concentration": conc,
+                    "released": float(releases or not jams),
+                    "release_time": 2.0 if releases else 15.0 - 0.1 * i,
+                    "release_observed": float(releases),
+                    "jammed_fraction": (0.1 if releases else 0.8) if jams else 0.0,
+                    "crushing_energy": 0.0,
+                }
+            )
+    cols = {k: np.array([r[k] for r in rows]) for k in rows[0]}
+    for name, force in (("jammed_fraction_5kN", 5e3), ("jammed_fraction_20kN", 2e4)):
+        cols[name] = cols["jammed_fraction"] * (cols["peak_force"] > force)
     n = len(rows)
+    data = {k: ("world", v) for k, v in cols.items() if k not in ("law", "seed", "mu")}
+    data["status"] = ("world", np.full(n, "complete"))
     return xr.Dataset(
-        {
-            "peak_force": ("world", peak),
-            "mean_force": ("world", peak / 3),
-            "friction_energy": ("world", peak / 10),
-            "concentration": ("world", conc),
-            "final_force": ("world", np.where(released == 1, 0.0, peak)),
-            "released": ("world", released),
-            "status": ("world", np.full(n, "complete")),
-        },
+        data,
         coords={
             "world": np.arange(n),
-            "seed": ("world", seed),
-            "law": ("world", label),
-            f"field.{study.FIELD}.area_fraction": ("world", f),
+            "seed": ("world", cols["seed"]),
+            "law": ("world", cols["law"]),
+            "mu": ("world", cols["mu"]),
         },
     )
 
 
-def test_claims_and_carriers_on_a_dataset_with_known_answers():
-    """Every claim's verdict and effect is what the synthetic dataset was built to give, and
-    the release is carried by rate, the steadier dissipation by rate and memory together."""
-    table = study.study_table(synthetic())
-    by = {(c["claim"], c.get("model")): c for c in study.claims(table)}
-    assert by[("mu = 0.1: blocks slide easily past the pillar", None)]["verdict"] == "holds"
-    assert by[("mu = 0.9: the blocks jam", None)]["verdict"] == "holds"
-    assert by[("mu = 0.9: the jam is never broken", None)]["verdict"] == "holds"
-    assert by[("mu = 0.5: jams form and break", None)]["verdict"] == "contradicted"
-    jams = by[("higher friction jams more", None)]
-    assert jams["effect"] == 1.0 and jams["n"] == 24
-    release = "rate-and-state releases jams more easily than mu = 0.9"
-    assert by[(release, "rate-state")]["effect"] == -1.0
-    assert by[(release, "memory-only")]["verdict"] == "undecided"  # no difference at all
-    carried = {c["claim"]: c["carried_by"] for c in study.carriers(study.claims(table))}
-    assert carried[release].startswith("rate (")
+def synthetic_results(layouts: int = LAYOUTS, shift: float = 1.1) -> dict:
+    """``run.run_arms``' result for a study of ``layouts`` per stratum (no strengths)."""
+    log = [{"workers": 2, "scheduler": None, "wall_time": 10.0, "world_steps": 1000}]
+    return {
+        a.name: (a, _dataset(a, shift if a.kind == "step" else 1.0), log)
+        for a in design(layouts, strength_layouts=0)
+    }
+
+
+@pytest.fixture(scope="module")
+def summary(tmp_path_factory):
+    out = tmp_path_factory.mktemp("study")
+    s = study_report.write_report(synthetic_results(), out, until=20.0)
+    (out / "study.json").write_text(json.dumps(s, allow_nan=True))
+    return out, s
+
+
+def test_claims_and_carriers_on_a_study_with_known_answers(summary):
+    """Every verdict is what the synthetic study was built to give, in both strata, after
+    Holm's correction over the family; release and time jammed are carried by rate."""
+    _, s = summary
+    claims = s["claims"]["no strength"]
+    assert {c["stratum"] for c in claims} == {"0.85", "0.775"}
+    n_claims = len(claims)
+    for c in claims:
+        assert c["p_holm"] >= c["p"] and c["p_holm"] <= min(1.0, n_claims * c["p"]) + 1e-12
+    by = {(c["stratum"], c["claim"], c.get("model")): c for c in claims}
+    for f in ("0.85", "0.775"):
+        slid = by[(f, "mu = 0.1: blocks slide easily past the pillar", None)]
+        assert slid["counts"] == f"{LAYOUTS} of {LAYOUTS}" and slid["verdict"] == "holds"
+        assert slid["p"] == pytest.approx(scipy.stats.binomtest(LAYOUTS, LAYOUTS).pvalue)
+        assert by[(f, "mu = 0.9: the blocks jam", None)]["verdict"] == "holds"
+        assert by[(f, "mu = 0.9: the jam is never broken", None)]["verdict"] == "holds"
+        assert by[(f, "mu = 0.5: jams form and break", None)]["verdict"] == "contradicted"
+        more = by[(f, "higher friction jams more", None)]
+        assert more["effect"] == 1.0 and more["verdict"] == "holds"
+        assert more["p"] == pytest.approx(2.0 / 2**LAYOUTS)
+        release = "rate-and-state releases jams more easily than mu = 0.9"
+        assert by[(f, release, "rate-state")]["verdict"] == "holds"
+        assert by[(f, release, "memory-only")]["verdict"] == "undecided"  # no difference
+        assert by[(f, release, "memory-only")]["p"] == 1.0
+        time = by[(f, "rate-and-state is jammed for less of the time than mu = 0.5", "rate-state")]
+        assert time["effect"] == pytest.approx(-0.7) and time["verdict"] == "holds"
+        # 16 equal differences: Wilcoxon's normal approximation with ties (SciPy's too).
+        ref = scipy.stats.wilcoxon(np.full(LAYOUTS, -0.7), method="approx").pvalue
+        assert time["p"] == pytest.approx(ref, rel=1e-9)
+    carried = {(c["stratum"], c["claim"]): c["carried_by"] for c in s["carriers"]["no strength"]}
+    assert carried[("0.85", release)].startswith("rate (")
     steadier = "rate-and-state dissipates more steadily than mu = 0.5"
-    assert carried[steadier].startswith("rate and memory together")
-    p = study.summarise(table)["mu0.9"]["pooled"]["jam"]
-    assert p["value"] == 1.0 and p["n"] == 24
+    assert carried[("0.85", steadier)].startswith("rate and memory together")
 
 
-def _report(out, layouts: int, runs=()) -> dict:
-    """The report of the synthetic study of ``layouts`` layouts, into ``out``."""
-    from taichi_ice.scene.parse import load_scenario
-
-    return study_report.study_report(
-        synthetic(layouts=layouts),
-        out,
-        scene=load_scenario("pillar"),
-        layouts=layouts,
-        until=20.0,
-        runs=list(runs),
-        arch="cpu",
-        precision="f64",
+def test_descriptions_release_curves_and_power(summary):
+    """Proportions with exact intervals, the Kaplan-Meier median of release (2 s for
+    rate-and-state, not reached for mu = 0.9: every jam censored), the power table."""
+    _, s = summary
+    d = s["described"]["af0.85"]
+    assert d["mu0.9"]["jam"]["k"] == LAYOUTS and d["mu0.9"]["jam"]["ci"][0] == pytest.approx(
+        scipy.stats.binomtest(LAYOUTS, LAYOUTS).proportion_ci(method="exact").low
     )
+    assert d["rate-state"]["release"]["median"] == 2.0
+    assert d["mu0.9"]["release"]["median"] is None and d["mu0.9"]["release"]["events"] == 0
+    assert d["mu0.1"]["jam"]["k"] == 0
+    claims = s["claims"]["no strength"]
+    more = next(c for c in claims if c["claim"] == "higher friction jams more")
+    assert more["n_needed"] is not None and more["n_needed"] <= LAYOUTS
 
 
-def test_report_writes_figures_json_and_markdown(tmp_path):
-    """The report of a study: three figures, study.json with every model, study.md tables."""
-    runs = [{"workers": 2, "scheduler": None, "wall_time": 10.0, "world_steps": 1000}]
-    summary = _report(tmp_path, 4, runs)
-    summary["wall_time"] = 11.0
-    for name in ("study_distributions", "study_jam_vs_mu", "study_phase_map"):
-        assert (tmp_path / "figures" / f"{name}.png").stat().st_size > 20_000
-    assert set(summary["summary"]) == {label for label, _ in MODELS}
-    assert summary["effective_mu"]["memory-only"] == pytest.approx(0.872)
-    # Steady state at the pusher's 0.1 m/s: mu0 + (A - B) ln(0.1 / v_star).
-    assert summary["effective_mu"]["rate-state"] == pytest.approx(
-        0.872 + (0.05 - 0.112) * np.log(0.1 / 1e-5)
-    )
-    json.dumps(summary)  # serialisable
-    # Every world's values, as in the dataset, with its model, area fraction and seed.
-    ds = synthetic(layouts=4)
-    rows = summary["per_world"]
-    assert len(rows) == ds.sizes["world"]
-    key = study.FIELD
-    for w in range(ds.sizes["world"]):
-        law, seed = str(ds["law"].values[w]), int(ds["seed"].values[w])
-        fraction = float(ds[f"field.{key}.area_fraction"].values[w])
-        (row,) = [
-            r for r in rows if (r["model"], r["seed"], r["area_fraction"]) == (law, seed, fraction)
-        ]
-        assert row["peak_force"] == ds["peak_force"].values[w]
-        assert row["released"] == ds["released"].values[w]
-        assert row["jam"] == float(ds["peak_force"].values[w] > study.JAM_FORCE)
-    md = study_report.study_markdown(summary)
-    assert "| mu0.9 |" in md and "carried by" in md and "100 world-steps/s" in md
+def test_step_bias_finds_a_set_shift_and_no_other(summary):
+    """The half-step arm differs only in rate-state's frictional energy (x 1.1): that row's
+    relative shift is +10 % (every layout +10 %: Wilcoxon's exact p 2 / 2^8); every other
+    row has no shift."""
+    _, s = summary
+    (step,) = s["step_bias"]
+    assert step["against"] == "af0.85"
+    rows = {(r["model"], r["measure"]): r for r in step["rows"]}
+    moved = rows[("rate-state", "friction_energy")]
+    assert moved["relative"] == pytest.approx(0.1) and moved["n"] == LAYOUTS // 2
+    assert moved["wilcoxon_p"] == pytest.approx(2.0 / 2 ** (LAYOUTS // 2))
+    assert moved["shift_over_se"] > 0
+    for key, r in rows.items():
+        if key != ("rate-state", "friction_energy") and "shift" in r:
+            assert r["shift"] == 0.0 and r["wilcoxon_p"] == 1.0
+        if "mcnemar" in r:
+            assert r["mcnemar"]["only_a"] == r["mcnemar"]["only_b"] == 0
 
 
-def test_the_docs_script_recomputes_the_jams_from_study_json(tmp_path, capsys):
-    """docs/study/recompute.py reads per_world alone: its jam counts are the summary's, with
-    the exact interval (12 of 12: [0.735, 1]); mu = 0.9 holds every jam that rate-and-state
-    releases, on 12 layouts of each area fraction (McNemar p = 2 / 2^12)."""
+def test_report_writes_json_markdown_netcdf_and_figures(summary):
+    """study.json carries every world (its arm, stratum, model, seed, law parameter and
+    metrics, as in the sweep datasets); study.nc holds the same values; four figures."""
+    import xarray as xr
+
+    out, s = summary
+    results = synthetic_results()
+    rows = s["per_world"]
+    assert len(rows) == sum(int(ds.sizes["world"]) for _, ds, _ in results.values())
+    for name, (arm, ds, _) in results.items():
+        mine = {(r["model"], r["seed"]): r for r in rows if r["arm"] == name}
+        for w in range(ds.sizes["world"]):
+            row = mine[(str(ds["law"].values[w]), int(ds["seed"].values[w]))]
+            assert row["area_fraction"] == arm.fraction
+            assert row["peak_force"] == ds["peak_force"].values[w]
+            assert row["jam"] == float(ds["peak_force"].values[w] > study.JAM_FORCE)
+            mu = ds["mu"].values[w]
+            assert row["mu"] is None if np.isnan(mu) else row["mu"] == mu
+    nc = xr.open_dataset(out / "study.nc")
+    assert nc.sizes["world"] == len(rows)
+    assert list(nc["arm"].values) == [r["arm"] for r in rows]
+    assert np.array_equal(nc["seed"].values, [r["seed"] for r in rows])
+    assert np.array_equal(nc["peak_force"].values, [r["peak_force"] for r in rows])
+    assert nc["peak_force"].attrs["units"] == "N"
+    nc.close()
+    for name in ("study_phase_map", "study_release", "study_distributions", "study_step_bias"):
+        assert (out / "figures" / f"{name}.png").stat().st_size > 20_000
+    md = (out / "study.md").read_text()
+    assert "## The paper's claims, tested (no strength)" in md and "carried by" in md
+    assert "## The step's bias: half-step-af0.85 against af0.85" in md
+    json.dumps(s, allow_nan=True)
+
+
+def test_the_docs_script_recomputes_the_study_from_study_json(summary, capsys):
+    """docs/study/recompute.py reads per_world alone: its jam counts are the report's, with
+    the exact interval; mu = 0.9 holds every jam rate-and-state releases (McNemar p 2/2^16)
+    and its share of time jammed is the report's Wilcoxon p."""
     import importlib.util
 
-    summary = _report(tmp_path, 12)
-    path = tmp_path / "study.json"
-    path.write_text(json.dumps(summary))
+    out, s = summary
     spec = importlib.util.spec_from_file_location(
         "recompute", Path(__file__).resolve().parents[1] / "docs" / "study" / "recompute.py"
     )
     recompute = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(recompute)
-    cells = recompute.strata(summary["per_world"])
-    for model, fraction, k, n, low, high in recompute.jam_table(cells):
-        want = summary["summary"][model]["by_fraction"][f"{fraction:g}"]["jam"]["value"]
-        assert (k / n, n) == (want, 12)
-        if k == n:
-            assert (round(low, 3), high) == (0.735, 1.0)
-    pairs = recompute.paired(cells, "mu0.9", "rate-state", "held")
-    assert [f for f, *_ in pairs] == [0.7, 0.85]
-    for _, n, only_a, only_b, p in pairs:
-        assert (n, only_a, only_b) == (12, 12, 0) and p == pytest.approx(2.0 / 2**12)
-    assert recompute.main([str(path)]) == 0
+    cells = recompute.strata(s["per_world"])
+    for arm, model, k, n, low, high in recompute.jam_table(cells):
+        want = s["described"][arm][model]["jam"]
+        assert (k, n) == (want["k"], want["n"]) and [low, high] == want["ci"]
+    pairs = {arm: rest for arm, *rest in recompute.paired(cells, "mu0.9", "rate-state", "held")}
+    n, said, p = pairs["af0.85"]
+    assert n == LAYOUTS and said == f"only mu0.9 {LAYOUTS}, only rate-state 0"
+    assert p == pytest.approx(2.0 / 2**LAYOUTS)
+    claim = next(
+        c
+        for c in s["claims"]["no strength"]
+        if c["stratum"] == "0.775"
+        and c["claim"] == "rate-and-state is jammed for less of the time than mu = 0.9"
+        and c["model"] == "steady-state"
+    )
+    pairs = {
+        arm: rest
+        for arm, *rest in recompute.paired(cells, "steady-state", "mu0.9", "jammed_fraction")
+    }
+    assert pairs["af0.775"][2] == pytest.approx(claim["p"], rel=1e-12)
+    assert recompute.main([str(out / "study.json")]) == 0
     assert "rate-state against mu0.9" in capsys.readouterr().out
+
+
+def test_a_short_study_runs_end_to_end(tmp_path):
+    """`run_study` of two layouts per stratum and the half step, 0.3 s each, in this process:
+    every arm's sweep runs, and study.json, study.md, study.nc and the figures are written;
+    a second call resumes (runs nothing)."""
+    from taichi_ice.experiments.study.run import run_study
+
+    kw = dict(control_layouts=0, strength_layouts=0, until=0.3, workers=0, progress=False)
+    s = run_study(tmp_path, 2, **kw)
+    assert s["worlds"] == 3 * 2 * 8 and s["status"] == {"complete": 48}
+    assert {d["arm"] for d in s["design"]} == {"af0.85", "af0.775", "half-step-af0.85"}
+    for name in ("study.json", "study.md", "study.nc"):
+        assert (tmp_path / name).stat().st_size > 0
+    again = run_study(tmp_path, 2, **kw)
+    assert all(log[-1]["worlds_run"] == 0 for log in again["runs"].values())
+    assert again["per_world"] == s["per_world"]

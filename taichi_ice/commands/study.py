@@ -1,16 +1,19 @@
-"""``taichi-ice study``: its options and its body (the study itself is ``study`` and
-``study.report``)."""
+"""``taichi-ice study``: its options and its body (the study itself is
+``experiments.study``: its design, run, statistics and report)."""
 
 from __future__ import annotations
 
-from ..experiments.study.stats import DEFAULT_LAYOUTS
+from ..experiments.study.design import DEFAULT_LAYOUTS
 
 EXAMPLES = """examples:
-  taichi-ice study --out out/study                       # the default size (~10 min on 2 cores)
-  taichi-ice study --out out/study --layouts 32 --workers 16
-  taichi-ice study --out out/study --scheduler tcp://10.0.0.1:8786 --layouts 200
-  taichi-ice study --out /tmp/smoke --layouts 2 --until 0.5   # a smoke run
-Run it again with the same --out to resume, or with more --layouts to grow it."""
+  taichi-ice study --out out/study                       # the smallest study (~3 min on 2 cores)
+  taichi-ice study --out out/study --layouts 64          # issue 31's study (~40 min on 2 cores)
+  taichi-ice study --out out/study --layouts 200 --scheduler tcp://10.0.0.1:8786
+  taichi-ice study --out /tmp/smoke --until 0.5          # a smoke run
+Run it again with the same --out to resume, or with more --layouts to grow it. The arms:
+the strata 0.85 and 0.775 (--layouts each), the control 0.70, the half step on 0.85 and
+the ice strengths 1 and 3 MPa on both strata (each --layouts / 2 unless given; 0 drops an
+arm)."""
 
 
 def add_options(p) -> None:
@@ -21,8 +24,21 @@ def add_options(p) -> None:
         "--layouts",
         type=int,
         default=DEFAULT_LAYOUTS,
-        help=f"jittered layouts per model and area fraction (default {DEFAULT_LAYOUTS})",
+        help="layouts (jittered fields) per jamming stratum, each run under all eight models "
+        f"(default {DEFAULT_LAYOUTS}; issue 31's study: 64)",
     )
+    for name, what in (
+        ("control", "of the control stratum (area fraction 0.70)"),
+        ("step", "run again at half the default step (stratum 0.85)"),
+        ("strength", "per stratum with each ice strength (1 and 3 MPa)"),
+    ):
+        p.add_argument(
+            f"--{name}-layouts",
+            type=int,
+            default=None,
+            metavar="N",
+            help=f"layouts {what} (default --layouts / 2, at least 2; 0: not run)",
+        )
     from .sweep import add_cluster_options
 
     add_cluster_options(p)
@@ -30,14 +46,21 @@ def add_options(p) -> None:
 
 def study_command(args) -> int:
     """The body of ``taichi-ice study``."""
-    from ..experiments.study.report import run_study
+    from ..experiments.study.run import run_study
     from ..experiments.sweep.spec import SweepError
 
     if args.layouts < 2:
         raise SweepError(f"--layouts {args.layouts}: a confidence interval needs 2 or more")
+    for name in ("control", "step", "strength"):
+        n = getattr(args, f"{name}_layouts")
+        if n is not None and n not in (0,) and n < 2:
+            raise SweepError(f"--{name}-layouts {n}: give 0 (no such arm) or 2 or more")
     run_study(
         args.out,
         args.layouts,
+        control_layouts=args.control_layouts,
+        step_layouts=args.step_layouts,
+        strength_layouts=args.strength_layouts,
         workers=args.workers,
         scheduler=args.scheduler,
         until=args.until,
@@ -45,5 +68,5 @@ def study_command(args) -> int:
         precision=args.precision,
         progress=not args.quiet,
     )
-    print(f"wrote {args.out}/study.md, study.json and figures/")
+    print(f"wrote {args.out}/study.md, study.json, study.nc and figures/")
     return 0

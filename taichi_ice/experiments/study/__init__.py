@@ -1,3 +1,4 @@
-"""The study of the paper's open question: ``stats`` (the design, bootstrap intervals,
-verdicts, the claims and what carries them) and ``report`` (the run, study.json, its
-markdown and figures)."""
+"""The study of the paper's open question (issue 31): ``design`` (its arms: strata by area
+fraction with their own layouts, a control, the half step, two ice strengths), ``run`` (each
+arm a sweep on one Dask cluster), ``stats`` (exact intervals, paired tests, Holm, power,
+Kaplan-Meier, the step's bias), ``report`` (study.json, study.md, study.nc) and ``figures``."""

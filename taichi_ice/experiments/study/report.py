@@ -1,378 +1,350 @@
-"""The study's run and report: ``run_study`` (the sweep, then study.json, study.md and the
-figures), ``study.report`` and ``study_markdown``, and the three figures.
+"""The study's report: study.json (every number, every world's values), study.md (the
+tables, for people), study.nc (every world's values, for xarray) and the figures.
 
-The statistics and the claims they test are ``study``'s; the command line ``commands.study``'s.
+The statistics are ``stats``'s, the design ``design``'s, the running ``run``'s.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
+from ..metrics import JAM_FORCE, JAM_FORCES
+from .design import MODELS
 from .stats import (
-    AREA_FRACTIONS,
+    ALPHA,
     BOOTSTRAP_RESAMPLES,
     BOOTSTRAP_SEED,
     CONFIDENCE,
-    DEFAULT_LAYOUTS,
-    JAM_FORCE,
-    METRIC_ROWS,
-    MODELS,
+    POWER,
     RATE_STATE_ROLES,
-    bootstrap_ci,
     carriers,
-    claims,
+    cells,
+    describe,
     effective_mu,
-    pooled,
-    study_sweep,
-    study_table,
-    summarise,
+    family,
+    step_bias,
+    stratum_claims,
+    world_rows,
 )
 
-
-def run_study(
-    out,
-    layouts: int = DEFAULT_LAYOUTS,
-    *,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    until: float | None = None,
-    arch: str = "cpu",
-    precision: str = "f64",
-    progress: bool = True,
-) -> dict:
-    """Run (or resume) the study into ``out`` and write its summary and figures.
-
-    Returns:
-        study.json's content.
-    """
-    from ..sweep.run import run_sweep
-
-    out = Path(out)
-    start = time.perf_counter()
-    sweep = study_sweep(layouts, until)
-    n = len(sweep.worlds())
-    if progress:
-        print(
-            f"study: {layouts} layouts x {len(MODELS)} models x {len(AREA_FRACTIONS)} area "
-            f"fractions = {n} worlds of {sweep.until:g} s",
-            file=sys.stderr,
-            flush=True,
-        )
-    result = run_sweep(
-        sweep,
-        out / "sweep",
-        workers=workers,
-        scheduler=scheduler,
-        arch=arch,
-        precision=precision,
-        progress=progress,
-    )
-    log = json.loads((out / "sweep" / "sweep-log.json").read_text())
-    summary = study_report(
-        result.dataset(),
-        out,
-        scene=sweep.scene,
-        layouts=layouts,
-        until=sweep.until,
-        runs=log,
-        arch=arch,
-        precision=precision,
-    )
-    summary["wall_time"] = time.perf_counter() - start
-    (out / "study.json").write_text(json.dumps(summary, indent=1, allow_nan=True) + "\n")
-    (out / "study.md").write_text(study_markdown(summary))
-    if progress:
-        print(
-            f"study: done in {summary['wall_time']:.0f} s; wrote {out}/study.md, study.json, "
-            "figures/",
-            file=sys.stderr,
-        )
-    return summary
+__all__ = ["study_markdown", "study_summary", "write_dataset", "write_report"]
 
 
-def per_world(table: dict) -> list[dict]:
-    """Every world's values, so that a reader can recompute each verdict: its model, area
-    fraction and seed, its metrics and its jam (``jam``, ``broken``, ``held``); NaN (a world
-    that did not complete, or ``broken`` without a jam) written as None."""
-    rows = []
-    for model, cells in table.items():
-        for fraction, cell in cells.items():
-            names = [k for k in cell if k != "seed"]
-            for i, seed in enumerate(cell["seed"]):
-                row = {"model": model, "area_fraction": fraction, "seed": int(seed)}
-                for k in names:
-                    v = float(cell[k][i])
-                    row[k] = v if math.isfinite(v) else None
-                rows.append(row)
-    return rows
+def _strength_label(strength: float | None) -> str:
+    return "no strength" if strength is None else f"{strength / 1e6:g} MPa"
 
 
-def study_report(ds, out, *, scene, layouts, until, runs, arch, precision) -> dict:
-    """The study's summary (study.json's content, but its wall time) and figures (into
-    ``out/figures``) from the sweep's dataset ``ds``; ``runs`` is the sweep's log."""
+def study_summary(results: dict, *, until: float, arch: str, precision: str) -> dict:
+    """study.json's content (but its wall time) from ``run.run_arms``' ``results``."""
     from ...physics.friction_parse import law_from_table
+    from ...scene.parse import load_scenario
 
-    out = Path(out)
-    table = study_table(ds)
-    claim_list = claims(table)
-    speed = _pusher_speed(scene)
-    summary = {
-        "scene": str(scene.source),
-        "layouts": layouts,
-        "area_fractions": sorted(next(iter(table.values()))),
-        "models": [label for label, _ in MODELS],
+    rows = world_rows(results)
+    arms = {name: arm for name, (arm, _, _) in results.items()}
+    described = {name: describe(cells(rows, name)) for name in arms}
+    families = {}
+    for strength in dict.fromkeys(a.strength for a in arms.values() if a.kind != "step"):
+        strata = {
+            f"{a.fraction:g}": stratum_claims(cells(rows, name))
+            for name, a in arms.items()
+            if a.kind in ("stratum", "strength") and a.strength == strength
+        }
+        if strata:
+            families[_strength_label(strength)] = family(strata)
+    steps = []
+    for name, a in arms.items():
+        if a.kind != "step":
+            continue
+        base = next(n for n, b in arms.items() if b.kind == "stratum" and b.fraction == a.fraction)
+        seeds = a.seeds
+        steps.append(
+            {
+                "arm": name,
+                "against": base,
+                "area_fraction": a.fraction,
+                "dt_safety": a.dt_safety,
+                "rows": step_bias(cells(rows, base, seeds), cells(rows, name), cells(rows, base)),
+            }
+        )
+    scene = load_scenario("pillar")
+    speed = max(float(np.hypot(*b.velocity)) for b in scene.bodies if b.kind == "kinematic")
+    status: dict = {}
+    for r in rows:
+        status[r["status"]] = status.get(r["status"], 0) + 1
+    return {
+        "scene": "pillar",
         "until": until,
         "arch": arch,
         "precision": precision,
+        "models": [label for label, _ in MODELS],
+        "design": [
+            {
+                "arm": name,
+                "kind": a.kind,
+                "area_fraction": a.fraction,
+                "layouts": a.layouts,
+                "seeds": [a.seeds[0], a.seeds[-1]],
+                "dt_safety": a.dt_safety,
+                "strength": a.strength,
+            }
+            for name, a in arms.items()
+        ],
         "jam_force_N": JAM_FORCE,
-        "bootstrap": {
-            "resamples": BOOTSTRAP_RESAMPLES,
-            "confidence": CONFIDENCE,
-            "seed": BOOTSTRAP_SEED,
-        },
-        "worlds": int(ds.sizes["world"]),
-        "status": {
-            s: int((ds["status"].values == s).sum()) for s in np.unique(ds["status"].values)
-        },
-        "runs": runs,
+        "jam_forces_N": sorted(JAM_FORCES.values()),
+        "alpha": ALPHA,
+        "power": POWER,
+        "confidence": CONFIDENCE,
+        "bootstrap": {"resamples": BOOTSTRAP_RESAMPLES, "seed": BOOTSTRAP_SEED},
+        "worlds": len(rows),
+        "status": status,
+        "runs": {name: log for name, (_, _, log) in results.items()},
+        "pusher_speed": speed,
         "effective_mu": {
             label: effective_mu(law_from_table(t), speed)
             for label, t in MODELS
             if label in RATE_STATE_ROLES
         },
-        "pusher_speed": speed,
-        "summary": summarise(table),
-        "claims": claim_list,
-        "carriers": carriers(claim_list),
-        "per_world": per_world(table),
+        "described": described,
+        "claims": families,
+        "carriers": {k: carriers(v) for k, v in families.items()},
+        "step_bias": steps,
+        "per_world": [
+            {
+                k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                for k, v in r.items()
+            }
+            for r in rows
+        ],
     }
+
+
+def write_dataset(rows: list[dict], path: Path) -> Path:
+    """study.nc: every world's values (``per_world``) on a dimension ``world``, with the
+    metrics' units and long names (``metrics.METRIC_INFO``)."""
+    import xarray as xr
+
+    from ..metrics import METRIC_INFO
+
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    data = {}
+    for k in keys:
+        values = [r.get(k) for r in rows]
+        if all(isinstance(v, str) for v in values):
+            arr = np.array(values, dtype=str)
+        elif all(isinstance(v, int) and not isinstance(v, bool) for v in values):
+            arr = np.array(values, dtype=np.int64)
+        else:
+            arr = np.array([math.nan if v is None else float(v) for v in values])
+        units, long_name = METRIC_INFO.get(k, ("1", k.replace("_", " ")))
+        data[k] = ("world", arr, {"units": units, "long_name": long_name})
+    ds = xr.Dataset(data, coords={"world": np.arange(len(rows))})
+    ds.attrs.update(
+        {
+            "Conventions": "CF-1.8",
+            "title": "taichi-ice study: every world's values",
+            "source": "taichi-ice study",
+        }
+    )
+    ds.to_netcdf(path)
+    return path
+
+
+def write_report(
+    results: dict, out, *, until: float = 20.0, arch: str = "cpu", precision: str = "f64"
+) -> dict:
+    """study.md, study.nc and the figures into ``out``; returns study.json's content (the
+    caller writes it, with its wall time)."""
+    from .figures import plot_distributions, plot_phase_map, plot_release, plot_step_bias
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = study_summary(results, until=until, arch=arch, precision=precision)
+    write_dataset(summary["per_world"], out / "study.nc")
     figures = out / "figures"
     figures.mkdir(parents=True, exist_ok=True)
-    plot_distributions(table, figures / "study_distributions.png")
-    plot_jam_vs_mu(table, summary["effective_mu"], figures / "study_jam_vs_mu.png")
-    plot_phase_map(table, figures / "study_phase_map.png")
+    plot_phase_map(summary, figures / "study_phase_map.png")
+    plot_release(summary, figures / "study_release.png")
+    plot_distributions(summary, figures / "study_distributions.png")
+    if summary["step_bias"]:
+        plot_step_bias(summary, figures / "study_step_bias.png")
+    (out / "study.md").write_text(study_markdown(summary))
     return summary
 
 
-def _pusher_speed(scene) -> float:
-    speeds = [float(np.hypot(*b.velocity)) for b in scene.bodies if b.kind == "kinematic"]
-    return max(speeds) if speeds else math.nan
-
-
 # --------------------------------------------------------------------------------------------
-# Report
+# study.md
 # --------------------------------------------------------------------------------------------
 
 
-def _ci(e: dict, scale: float = 1.0, fmt: str = ".3g") -> str:
+def _p(x: float) -> str:
+    return f"{x:.2g}" if x >= 1e-3 else f"{x:.1e}"
+
+
+def _prop(e: dict) -> str:
+    if not e["n"]:
+        return "-"
+    lo, hi = e["ci"]
+    return f"{e['k']}/{e['n']} [{lo:.2f}, {hi:.2f}]"
+
+
+def _quart(e: dict, scale: float = 1.0, fmt: str = ".3g") -> str:
     if not e.get("n"):
         return "-"
-    v, (lo, hi) = e["value"], e["ci"]
-    return f"{v * scale:{fmt}} [{lo * scale:{fmt}}, {hi * scale:{fmt}}]"
+    return f"{e['median'] * scale:{fmt}} [{e['q25'] * scale:{fmt}}, {e['q75'] * scale:{fmt}}]"
 
 
-def _where(run: dict) -> str:
-    if run.get("scheduler"):
-        return f"{run['workers']} workers at {run['scheduler']}"
-    return f"{run['workers']} local workers" if run["workers"] else "one process"
+def _release(e: dict) -> str:
+    if not e["n"]:
+        return "-"
+    median = "not reached" if e["median"] is None else f"{e['median']:.1f} s"
+    return f"{median} ({e['events']} of {e['n']} released)"
+
+
+def describe_table(entry: dict) -> list[str]:
+    """One arm's description: a row per model."""
+    lines = [
+        "| model | jam > 5 kN | jam > 10 kN | jam > 20 kN | held at the end | median time to "
+        "release (KM) | share of time above 10 kN | peak force (kN) | frictional energy (kJ) "
+        "| largest 1-s share |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for model, e in entry.items():
+        lines.append(
+            f"| {model} | {_prop(e['jam_5kN'])} | {_prop(e['jam'])} | {_prop(e['jam_20kN'])} "
+            f"| {_prop(e['held'])} | {_release(e['release'])} "
+            f"| {_quart(e['jammed_fraction'], 1.0, '.2f')} | {_quart(e['peak_force'], 1e-3)} "
+            f"| {_quart(e['friction_energy'], 1e-3)} | {_quart(e['concentration'], 1.0, '.2f')} |"
+        )
+    return lines
+
+
+def claims_table(claims: list[dict]) -> list[str]:
+    lines = [
+        "| stratum | claim | model | statement | test | effect [95 % CI] | p | p (Holm) "
+        "| layouts run / for 80 % power | verdict |",
+        "|---|---|---|---|---|---:|---:|---:|---:|---|",
+    ]
+    for c in claims:
+        lo, hi = c["ci"]
+        effect = f"{c['effect']:+.3g} [{lo:+.3g}, {hi:+.3g}]"
+        if "counts" in c:
+            effect += f" ({c['counts']})"
+        need = c["n_needed"] if c["n_needed"] is not None else "-"
+        lines.append(
+            f"| {c['stratum']} | {c['claim']} | {c.get('model', '')} | {c['statement']} "
+            f"| {c['test']} | {effect} | {_p(c['p'])} | {_p(c['p_holm'])} "
+            f"| {c['n']} / {need} | **{c['verdict']}** |"
+        )
+    return lines
+
+
+def step_table(step: dict) -> list[str]:
+    lines = [
+        "| model | measure | n | mean at the default step | shift [95 % CI] | relative "
+        "| Wilcoxon p (Holm) | KS D (p) | median shift [95 % CI] | shift / SE of a stratum "
+        "mean |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in step["rows"]:
+        if "mcnemar" in r:
+            continue
+        lo, hi = r["ci"]
+        q = next(x for x in r["quantiles"] if x["q"] == 0.5)
+        lines.append(
+            f"| {r['model']} | {r['measure']} | {r['n']} | {r['default_mean']:.3g} "
+            f"| {r['shift']:+.3g} [{lo:+.3g}, {hi:+.3g}] | {r['relative']:+.0%} "
+            f"| {_p(r['wilcoxon_p'])} ({_p(r['wilcoxon_p_holm'])}) "
+            f"| {r['ks']['statistic']:.2f} ({_p(r['ks']['p'])}) "
+            f"| {q['shift']:+.3g} [{q['low']:+.3g}, {q['high']:+.3g}] "
+            f"| {r['shift_over_se']:.2f} |"
+        )
+    binary = [r for r in step["rows"] if "mcnemar" in r]
+    lines += ["", "| model | outcome | default step | half step | discordant | McNemar p |"]
+    lines += ["|---|---|---:|---:|---:|---:|"]
+    for r in binary:
+        m = r["mcnemar"]
+        lines.append(
+            f"| {r['model']} | {r['measure']} | {m['a']}/{m['n']} | {m['b']}/{m['n']} "
+            f"| {m['only_a']} vs {m['only_b']} | {_p(m['p'])} |"
+        )
+    return lines
 
 
 def study_markdown(s: dict) -> str:
     """study.md: the tables of study.json, for people."""
-    runs = s["runs"]
-    ran = sum(r["world_steps"] for r in runs)
-    wall = sum(r["wall_time"] for r in runs)
     lines = [
-        "# The study: jams at a pillar over layouts, friction models and area fractions",
+        "# The study: jams at a pillar, by stratum, friction model, step and ice strength",
         "",
-        f"Scene `{Path(s['scene']).name}`, {s['layouts']} layouts x {len(s['models'])} models x "
-        f"{len(s['area_fractions'])} area fractions "
-        f"({', '.join(f'{f:g}' for f in s['area_fractions'])}) "
-        f"= {s['worlds']} worlds of {s['until']:g} s, {s['arch']}/{s['precision']}; "
-        f"status: {', '.join(f'{k} {v}' for k, v in s['status'].items())}. "
-        f"Sweep: {wall:.0f} s of wall time over {len(runs)} invocation(s), "
-        f"{ran / max(wall, 1e-9):.0f} world-steps/s "
-        f"({', '.join(_where(r) for r in runs)}); the study "
-        f"{s['wall_time']:.0f} s in all.",
+        f"Scene `pillar`, {s['worlds']} worlds of {s['until']:g} s, {s['arch']}/"
+        f"{s['precision']}; status: {', '.join(f'{k} {v}' for k, v in s['status'].items())}. "
+        "Each arm is a stratum (area fraction) at one step and strength, every model on the "
+        "same layouts (paired); the strata draw their own layouts (independent).",
         "",
-        f"A jam: peak pillar force above {s['jam_force_N'] / 1e3:g} kN. Broken: the force over "
-        "the last second below a tenth of its peak. Values: mean [95 % percentile bootstrap "
-        f"CI, {s['bootstrap']['resamples']} resamples] over every layout and area fraction.",
-        "",
-        "| model | " + " | ".join(label for _, label, _ in METRIC_ROWS) + " |",
-        "|---|" + "---:|" * len(METRIC_ROWS),
+        "| arm | kind | area fraction | layouts (seeds) | step (x stable limit) | strength "
+        "| wall time (s) | world-steps/s |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
     ]
-    scale = {"N": (1e-3, " kN"), "J": (1e-3, " kJ"), "1": (1.0, "")}
-    for model, entry in s["summary"].items():
-        cells = []
-        for name, _, unit in METRIC_ROWS:
-            k, suffix = scale[unit]
-            cells.append(_ci(entry["pooled"][name], k) + suffix)
-        lines.append(f"| {model} | " + " | ".join(cells) + " |")
+    for d in s["design"]:
+        runs = s["runs"][d["arm"]]
+        wall = sum(r["wall_time"] for r in runs)
+        steps = sum(r["world_steps"] for r in runs)
+        lines.append(
+            f"| {d['arm']} | {d['kind']} | {d['area_fraction']:g} | {d['layouts']} "
+            f"({d['seeds'][0]}-{d['seeds'][1]}) | {d['dt_safety'] or 'default'} "
+            f"| {_strength_label(d['strength'])} | {wall:.0f} | {steps / max(wall, 1e-9):.0f} |"
+        )
     lines += [
         "",
-        "P(jam) by area fraction (the phase map):",
+        f"A jam: peak pillar force above {s['jam_force_N'] / 1e3:g} kN (also 5 and 20 kN). "
+        "Held at the end: a jam whose force over the last second is not below a tenth of its "
+        "peak. Time to release: from the peak to the first second whose mean force is below "
+        "a tenth of it, over the layouts that jammed, Kaplan-Meier with the run's end as "
+        "censoring. Proportions: k/n [exact 95 % CI]; measures: median [quartiles].",
         "",
-        "| model | " + " | ".join(f"{f:g}" for f in s["area_fractions"]) + " |",
-        "|---|" + "---:|" * len(s["area_fractions"]),
     ]
-    for model, entry in s["summary"].items():
-        cells = [
-            _ci(entry["by_fraction"][f"{f:g}"]["jam"], 1.0, ".2f") for f in s["area_fractions"]
+    for d in s["design"]:
+        lines += [f"## {d['arm']}", "", *describe_table(s["described"][d["arm"]]), ""]
+    for label, claims in s["claims"].items():
+        lines += [
+            f"## The paper's claims, tested ({label})",
+            "",
+            "Within each stratum, on the same layouts (paired). Holds: Holm-adjusted p <= "
+            f"{s['alpha']:g} over the {len(claims)} claims of this table, and the effect on the "
+            "claimed side; contradicted: on the other side; else undecided. Effects: "
+            "one-proportion claims, the proportion - 1/2 [exact CI]; paired 0/1 outcomes, the "
+            "difference of proportions [exact CI of the discordant split - 1/2]; measures, the "
+            "mean paired difference [bootstrap CI]. The last numeric column: layouts run, and "
+            f"layouts for {s['power']:.0%} power at the observed effect.",
+            "",
         ]
-        lines.append(f"| {model} | " + " | ".join(cells) + " |")
+        lines += [*claims_table(claims), ""]
+        lines += ["| stratum | claim | rate-state | steady-state | memory-only | carried by |"]
+        lines += ["|---|---|---|---|---|---|"]
+        for c in s["carriers"][label]:
+            v = c["verdicts"]
+            lines.append(
+                f"| {c['stratum']} | {c['claim']} | {v['rate-state']} | {v['steady-state']} "
+                f"| {v['memory-only']} | {c['carried_by']} |"
+            )
+        lines.append("")
+    for step in s["step_bias"]:
+        lines += [
+            f"## The step's bias: {step['arm']} against {step['against']}",
+            "",
+            f"The same layouts at {step['dt_safety']:g} x the stable limit (half the default). "
+            "Shift: half step minus default, mean over layouts [bootstrap CI]; shift / SE: its "
+            "size against the standard error of the stratum's mean at the default step (the "
+            "claims' sampling error; below 1: smaller).",
+            "",
+        ]
+        lines += [*step_table(step), ""]
     lines += [
-        "",
-        "## The paper's claims, tested",
-        "",
-        "Each claim as a statement on the runs, its effect size with a 95 % CI and the number "
-        "of layouts (or pairs: the same layout and area fraction under two models). Holds: "
-        "the CI excludes no effect on the claimed side; contradicted: on the other side.",
-        "",
-        "| claim | statement | effect [95 % CI] | n | verdict |",
-        "|---|---|---:|---:|---|",
-    ]
-    for c in s["claims"]:
-        lo, hi = c["ci"]
-        lines.append(
-            f"| {c['claim']} | {c['statement']} | {c['effect']:+.3f} [{lo:+.3f}, {hi:+.3f}] "
-            f"| {c['n']} | {c['verdict']} |"
-        )
-    lines += ["", "## Rate, memory or both", ""]
-    lines += [
-        "| claim | rate-state | steady-state (rate only) | memory-only | carried by |",
-        "|---|---|---|---|---|",
-    ]
-    for c in s["carriers"]:
-        v = c["verdicts"]
-        lines.append(
-            f"| {c['claim']} | {v['rate-state']} | {v['steady-state']} | {v['memory-only']} "
-            f"| {c['carried_by']} |"
-        )
-    lines += [
-        "",
         "Effective mu (steady-state friction at the pusher's speed, "
         f"{s['pusher_speed']:g} m/s): "
         + ", ".join(f"{k} {v:.3f}" for k, v in s["effective_mu"].items())
         + ".",
     ]
     return "\n".join(lines) + "\n"
-
-
-# --------------------------------------------------------------------------------------------
-# Figures
-# --------------------------------------------------------------------------------------------
-
-
-def plot_distributions(table: dict, path: Path) -> Path:
-    """Peak force, frictional energy and its concentration per model (every layout and
-    area fraction): ``plots.plot_spread``."""
-    from ...run.plots import plot_spread
-    from ..ensemble import EnsembleResult
-    from ..models import MODEL_COLOURS, MODEL_TITLES
-
-    results = {}
-    for label, cells in table.items():
-        names = ("peak_force", "friction_energy", "concentration")
-        cols = {n: pooled(cells, n) for n in names}
-        k = len(cols["peak_force"])
-        results[label] = EnsembleResult(
-            series=[],
-            label=label,
-            seeds=list(range(k)),
-            metrics=[{n: float(cols[n][i]) for n in names} for i in range(k)],
-        )
-    colours = {**MODEL_COLOURS, "mu0.3": "C9", "mu0.7": "C6"}
-    return plot_spread(results, path, titles=MODEL_TITLES, colours=colours)
-
-
-def plot_jam_vs_mu(table: dict, eff_mu: dict, path: Path) -> Path:
-    """P(jam) and P(jam held at the end) against mu; the rate-and-state variants at their
-    effective mu; 95 % bootstrap CIs as bars."""
-    from ...run.plots import pyplot, save_figure
-
-    plt = pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
-    coulomb = [(label, float(label[2:])) for label, _ in MODELS if label.startswith("mu")]
-    markers = {"rate-state": "*", "steady-state": "s", "memory-only": "D"}
-    fractions = sorted(next(iter(table.values())))
-    for ax, name, title in zip(
-        axes, ("jam", "held"), ("a jam forms", "a jam still holds at the end")
-    ):
-        for k, f in enumerate([*fractions, None]):
-            if f is None:
-                pick = lambda c, name=name: pooled(c, name)  # noqa: E731
-            else:
-                pick = lambda c, f=f, name=name: c[f][name]  # noqa: E731
-            colour = f"C{k}" if f is not None else "k"
-            est = [bootstrap_ci(pick(table[label])) for label, _ in coulomb]
-            mus = [mu for _, mu in coulomb]
-            y = np.array([e[0] for e in est])
-            err = np.array([[e[0] - e[1] for e in est], [e[2] - e[0] for e in est]])
-            ax.errorbar(
-                mus,
-                y,
-                yerr=err,
-                color=colour,
-                marker="o",
-                capsize=3,
-                lw=2 if f is None else 1,
-                alpha=1 if f is None else 0.6,
-                label="all area fractions" if f is None else f"area fraction {f:g}",
-            )
-            for model, mark in markers.items():
-                e = bootstrap_ci(pick(table[model]))
-                ax.errorbar(
-                    [eff_mu[model]],
-                    [e[0]],
-                    yerr=[[e[0] - e[1]], [e[2] - e[0]]],
-                    color=colour,
-                    marker=mark,
-                    ms=10 if f is None else 6,
-                    ls="none",
-                    capsize=3,
-                    alpha=1 if f is None else 0.6,
-                    label=f"{model} (at its effective mu)" if f is None else None,
-                )
-        ax.set_xlabel("mu (rate-and-state variants: steady-state mu at the pusher's speed)")
-        ax.set_title(f"P({title})", fontsize=10)
-        ax.set_ylim(-0.05, 1.05)
-    axes[0].set_ylabel("probability over layouts (95 % CI)")
-    axes[1].legend(fontsize=7, loc="best")
-    return save_figure(fig, path)
-
-
-def plot_phase_map(table: dict, path: Path) -> Path:
-    """P(jam) for each model (rows) and area fraction (columns), with the layouts counted."""
-    from ...run.plots import pyplot, save_figure
-
-    plt = pyplot()
-    models = list(table)
-    fractions = sorted(next(iter(table.values())))
-    p = np.array([[np.nanmean(table[m][f]["jam"]) for f in fractions] for m in models])
-    n = np.array([[np.isfinite(table[m][f]["jam"]).sum() for f in fractions] for m in models])
-    fig, ax = plt.subplots(figsize=(6, 5))
-    im = ax.imshow(p, vmin=0, vmax=1, cmap="viridis", aspect="auto")
-    for i in range(len(models)):
-        for j in range(len(fractions)):
-            ax.text(
-                j,
-                i,
-                f"{p[i, j]:.2f}\n(n={n[i, j]})",
-                ha="center",
-                va="center",
-                fontsize=8,
-                color="w" if p[i, j] < 0.6 else "k",
-            )
-    ax.set_xticks(range(len(fractions)), [f"{f:g}" for f in fractions])
-    ax.set_yticks(range(len(models)), models)
-    ax.set_xlabel("area fraction of the rubble field")
-    ax.set_title(f"P(jam: peak pillar force > {JAM_FORCE / 1e3:g} kN)", fontsize=10)
-    fig.colorbar(im, ax=ax, label="probability over layouts")
-    return save_figure(fig, path)

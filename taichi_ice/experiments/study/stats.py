@@ -1,38 +1,36 @@
-"""The study the paper asked for: ``taichi-ice study --out DIR``.
+"""The study's statistics: every world's values, each stratum's description, the paper's
+claims tested within each stratum, the step's bias and the power each claim had.
 
 The paper ends: "the forces and energies calculated by the DEM are highly sensitive to
 initial conditions. By running larger suites of experiments, across a wider range of
 friction values, it may be possible to clarify the specific effects of incorporating rate
-dependence, memory dependence, or both." This is that suite: the pillar scene
-(``scenarios/pillar.toml``) over ``layouts`` jittered layouts x eight friction models
-(mu = 0.1, 0.3, 0.5, 0.7, 0.9; rate-and-state; its steady-state law, rate without memory;
-its memory-only variant, B = A) x the field's area fraction (``AREA_FRACTIONS``), run as one
-sweep (``taichi_ice.experiments.sweep.run``) on Dask.
+dependence, memory dependence, or both." The design is ``design``'s (strata by area
+fraction with their own layouts, a control, a half step, two ice strengths); this module
+analyses it, each method from ``experiments.inference`` (held against SciPy and statsmodels
+in the tests):
 
-Per model (over every layout and area fraction, and per area fraction), with percentile
-bootstrap confidence intervals over layouts (``bootstrap_ci``):
-
-- the probability that a jam forms (the peak pillar force exceeds ``JAM_FORCE``) and that a
-  jam breaks by the end (``metrics.RELEASED_FRACTION``: the force over the last second has
-  fallen below a tenth of its peak), and that a jam still holds at the end;
-- the mean of the peak and mean pillar force, the frictional energy and its concentration
-  in time (the largest share lost in any 1 s).
-
-The paper's claims are tested as statements on paired differences (the same layout and
-area fraction under two models), each with its effect size, confidence interval and the
-number of pairs; a claim holds when its interval excludes no effect on the claimed side,
-is contradicted when it excludes it on the other, and is undecided otherwise. Each
-rate-and-state claim is tested again with the steady-state law and with memory only in
-rate-and-state's place, which says whether rate, memory or both carry the effect.
-
-Writes into DIR: ``sweep/`` (the sweep: batch files, ``sweep.nc``), ``study.json``,
-``study.md`` and ``figures/``: ``study_distributions.png`` (each metric per model),
-``study_jam_vs_mu.png`` (jam probability against mu, the rate-and-state variants at their
-effective mu) and ``study_phase_map.png`` (jam probability against area fraction and model).
-
-This module holds the study's design (its models, area fractions, sweep) and statistics:
-the bootstrap, the table of runs, the summary, the claims and their carriers. Running it and
-writing its report and figures is ``study.report``'s; the command line ``commands.study``'s.
+- **Proportions** (a jam forms, a jam still holds at the end) with exact Clopper-Pearson
+  intervals; a jam at three thresholds (5, 10, 20 kN: ``metrics.JAM_FORCES``).
+- **Time to release** of the largest jam (``metrics.release``: from the peak to the first
+  second whose mean force is below a tenth of it), Kaplan-Meier over the runs that jammed,
+  censored at the run's end; the share of the run's time jammed; the frictional energy's
+  concentration in time (the largest share lost in 1 s).
+- **Claims within a stratum**, on the same layouts under two models (paired): the exact
+  McNemar test for 0/1 outcomes (effect: the share of the discordant layouts on the claimed
+  side, with its exact interval), the Wilcoxon signed-rank test for continuous ones (effect:
+  the mean paired difference with a percentile bootstrap interval over layouts); claims on
+  one model's proportion: the exact binomial test against 1/2. Holm's correction over every
+  claim of a family (the strata without strength; each strength its own). A claim **holds**
+  when its Holm-adjusted p is at most ``ALPHA`` and its effect lies on the claimed side, is
+  **contradicted** when it lies on the other side, and is **undecided** otherwise.
+- **Power**: per claim, the layouts that 80 % power at ``ALPHA`` needs at the observed effect
+  (exact for the binomial and McNemar tests; Wilcoxon through the t test's normal
+  approximation and the asymptotic relative efficiency 3/pi), beside the layouts run.
+- **The step's bias**: the half-step arm against the same layouts at the default step, per
+  model and measure: the mean paired shift with its interval, Wilcoxon, the exact two-sample
+  Kolmogorov-Smirnov test, quantile shifts (10, 50, 90 %) with bootstrap intervals, and the
+  shift over the standard error of the stratum's mean (below 1: smaller than the sampling
+  error of the claims).
 """
 
 from __future__ import annotations
@@ -41,43 +39,27 @@ import math
 
 import numpy as np
 
-from ..metrics import JAM_FORCE
+from .. import inference
+from ..metrics import JAM_FORCE, JAM_FORCES
+from .design import MODELS
 
-# The models of the study, in the order of its tables: (label, [[law]] table).
-MODELS = [
-    ("mu0.1", {"law": "coulomb", "mu": 0.1}),
-    ("mu0.3", {"law": "coulomb", "mu": 0.3}),
-    ("mu0.5", {"law": "coulomb", "mu": 0.5}),
-    ("mu0.7", {"law": "coulomb", "mu": 0.7}),
-    ("mu0.9", {"law": "coulomb", "mu": 0.9}),
-    ("rate-state", {"law": "rate-state"}),
-    ("steady-state", {"law": "steady-state"}),
-    ("memory-only", {"law": "memory-only"}),
-]
+ALPHA = 0.05
+POWER = 0.8
 RATE_STATE_ROLES = {
     "rate-state": "rate and memory",
     "steady-state": "rate only",
     "memory-only": "memory only",
 }
-# Share of the rubble field's lattice that is ice: the scene's own 0.85 and two looser
-# fields (row spacing 0.61 m and 0.68 m instead of 0.56 m; their first rows and the pusher
-# start lower, so the field is compacted against the pillar later).
-AREA_FRACTIONS = (0.70, 0.775, 0.85)
-FIELD = "rubble"
-# A jam: the pillar force exceeds ten times the paper's bound for blocks that "slide easily
-# past the pillar" (mu = 0.1: "forces never higher than 1 kN"): metrics.JAM_FORCE, 10 kN.
-FREE_FORCE = 1e3  # N: the paper's "never higher than 1 kN"
-# Layouts of the default study: what a 2-core machine runs in about 10 minutes (measured,
-# see README: about 24 worlds x 20 s per layout).
-DEFAULT_LAYOUTS = 2
+# The paper's bound for blocks that "slide easily past the pillar" (mu = 0.1).
+FREE_FORCE = 1e3  # N
+# The smallest force a run's peak is read at on a log scale (a run that never touches the
+# pillar has a peak of 0).
+FORCE_FLOOR = 1.0  # N
 BOOTSTRAP_RESAMPLES = 4000
 CONFIDENCE = 0.95
 BOOTSTRAP_SEED = 20130301  # the resampling is seeded: the study's numbers are reproducible
-
-
-# --------------------------------------------------------------------------------------------
-# Statistics
-# --------------------------------------------------------------------------------------------
+# The step's bias, measure by measure.
+STEP_MEASURES = ("peak_force", "friction_energy", "concentration", "jammed_fraction")
 
 
 def bootstrap_ci(
@@ -89,15 +71,9 @@ def bootstrap_ci(
     seed: int = BOOTSTRAP_SEED,
 ) -> tuple[float, float, float]:
     """``(estimate, low, high)``: ``statistic`` of ``values`` and its percentile bootstrap
-    confidence interval (Efron & Tibshirani 1993, ch. 13): resample the values with
-    replacement ``n_resamples`` times, take the statistic of each, and read the
-    ``(1 - confidence) / 2`` and ``(1 + confidence) / 2`` quantiles. NaNs are dropped;
-    ``(nan, nan, nan)`` when nothing is left.
-
-    Args:
-        values: ``(n,)`` one value per independent unit (a layout, or a pair of runs of it).
-        statistic: reduces an ``(..., n)`` array along its last axis (``np.mean``).
-    """
+    interval (Efron & Tibshirani 1993, ch. 13) over ``n_resamples`` resamples with
+    replacement. NaNs are dropped; ``(nan, nan, nan)`` when nothing is left. For continuous
+    values only: on 0/1 outcomes it gives zero-width intervals (use ``inference``)."""
     x = np.asarray(values, dtype=float)
     x = x[np.isfinite(x)]
     if not x.size:
@@ -110,258 +86,351 @@ def bootstrap_ci(
     return float(statistic(x)), float(low), float(high)
 
 
-def _estimate(values, statistic=np.mean) -> dict:
-    est, low, high = bootstrap_ci(values, statistic)
-    n = int(np.isfinite(np.asarray(values, dtype=float)).sum())
-    return {"value": est, "ci": [low, high], "n": n}
-
-
-def verdict(low: float, high: float, direction: int) -> str:
-    """'holds' if the interval lies wholly on the claimed side of 0 (``direction`` +1 or
-    -1), 'contradicted' if wholly on the other, else 'undecided'."""
-    if not (math.isfinite(low) and math.isfinite(high)):
-        return "undecided"
-    if direction * low > 0 and direction * high > 0:
-        return "holds"
-    if direction * low < 0 and direction * high < 0:
-        return "contradicted"
-    return "undecided"
-
-
-# --------------------------------------------------------------------------------------------
-# The sweep
-# --------------------------------------------------------------------------------------------
-
-
-def study_sweep(layouts: int, until: float | None = None, fractions=AREA_FRACTIONS):
-    """The study as a Sweep: the pillar scene, ``layouts`` seeds, the eight models, the
-    area fractions."""
-    from ..models import DEFAULT_SCENE
-    from ..sweep.spec import sweep_from_dict
-
-    data = {
-        "sweep": {
-            "scene": str(DEFAULT_SCENE),
-            "seeds": {"start": 0, "count": int(layouts)},
-            "metrics": [
-                "peak_force",
-                "mean_force",
-                "friction_energy",
-                "concentration",
-                "final_force",
-                "released",
-                "residual_rel",
-            ],
-        },
-        "law": [table for _, table in MODELS],
-        "overrides": {f"field.{FIELD}.area_fraction": list(fractions)},
-    }
-    if until is not None:
-        data["sweep"]["until"] = float(until)
-    return sweep_from_dict(data, source="<taichi-ice study>")
-
-
 def effective_mu(law, speed: float) -> float:
-    """The constant mu a rate-and-state variant sits at on the jam-probability axis: its
-    steady-state friction at the pusher's speed (the slip rate the pusher imposes on the
-    rubble it drives)."""
+    """The constant mu a rate-and-state variant sits at: its steady-state friction at the
+    pusher's speed (the slip rate the pusher imposes on the rubble it drives)."""
     return float(law.steady_state(np.array([speed]))[0])
 
 
 # --------------------------------------------------------------------------------------------
-# Analysis
+# Every world's values
 # --------------------------------------------------------------------------------------------
 
 
-def study_table(ds) -> dict[str, dict[float, dict[str, np.ndarray]]]:
-    """``{model: {area fraction: {metric: (layouts,) in seed order, "seed": ...}}}``."""
-    key = f"field.{FIELD}.area_fraction"
-    out: dict = {}
-    laws = ds["law"].values
-    fractions = ds[key].values
-    seeds = ds["seed"].values
-    for label, _ in MODELS:
-        out[label] = {}
-        for f in np.unique(fractions):
-            rows = np.nonzero((laws == label) & (fractions == f))[0]
-            rows = rows[np.argsort(seeds[rows])]
-            cell = {
-                name: ds[name].values[rows].astype(float)
-                for name in ds.data_vars
-                if ds[name].dtype.kind == "f"
-            }
-            cell["seed"] = seeds[rows]
-            peak = cell["peak_force"]
-            cell["jam"] = np.where(np.isfinite(peak), peak > JAM_FORCE, np.nan)
-            jam = cell["jam"] == 1
-            cell["broken"] = np.where(jam, cell["released"], np.nan)  # given a jam
-            cell["held"] = np.where(np.isfinite(peak), jam & (cell["released"] == 0), np.nan)
-            out[label][float(f)] = cell
+def derived(m: dict) -> dict:
+    """A world's 0/1 outcomes from its metrics (NaN where they are NaN): ``jam`` (peak above
+    ``JAM_FORCE``), ``jam_5kN``, ``jam_20kN``, ``held`` (a jam not released by the end),
+    ``slid`` (peak at most ``FREE_FORCE``)."""
+    peak, released = m.get("peak_force", math.nan), m.get("released", math.nan)
+    if not math.isfinite(peak):
+        return dict.fromkeys(("jam", "jam_5kN", "jam_20kN", "held", "slid"), math.nan)
+    out = {
+        f"jam{'' if name == 'jammed_fraction' else name[len('jammed_fraction') :]}": float(
+            peak > force
+        )
+        for name, force in JAM_FORCES.items()
+    }
+    out["held"] = float(peak > JAM_FORCE and released == 0)
+    out["slid"] = float(peak <= FREE_FORCE)
     return out
 
 
-METRIC_ROWS = (
-    ("jam", "P(jam forms)", "1"),
-    ("broken", "P(jam broken by the end, given a jam)", "1"),
-    ("held", "P(jam still held at the end)", "1"),
-    ("peak_force", "peak pillar force", "N"),
-    ("mean_force", "mean pillar force", "N"),
-    ("friction_energy", "frictional energy", "J"),
-    ("concentration", "largest 1-s share of the frictional energy", "1"),
-)
-
-
-def pooled(cells: dict, name: str) -> np.ndarray:
-    return np.concatenate([c[name] for c in cells.values()])
-
-
-def summarise(table: dict) -> dict:
-    """Per model: every METRIC_ROWS quantity with its bootstrap CI, pooled and per fraction."""
-    out = {}
-    for label, cells in table.items():
-        entry = {"pooled": {}, "by_fraction": {}}
-        for name, _, _ in METRIC_ROWS:
-            entry["pooled"][name] = _estimate(pooled(cells, name))
-            entry["pooled"][name]["median"] = (
-                float(np.nanmedian(pooled(cells, name)))
-                if np.isfinite(pooled(cells, name)).any()
-                else math.nan
-            )
-        for f, cell in cells.items():
-            entry["by_fraction"][f"{f:g}"] = {
-                name: _estimate(cell[name]) for name, _, _ in METRIC_ROWS
+def world_rows(results: dict) -> list[dict]:
+    """One row per world of every arm (``run.run_arms``' result): its arm, kind, stratum
+    (area fraction), step fraction, strength, model, law and parameters, seed, status, dt,
+    metrics and ``derived`` outcomes."""
+    rows = []
+    for name, (arm, ds, _log) in results.items():
+        params = [
+            c
+            for c in ds.coords
+            if ds[c].dims == ("world",) and c not in ("world", "seed", "law") and "." not in c
+        ]
+        metrics = [v for v in ds.data_vars if ds[v].dtype.kind == "f" and v != "dt"]
+        for i in range(int(ds.sizes["world"])):
+            row = {
+                "arm": name,
+                "kind": arm.kind,
+                "area_fraction": arm.fraction,
+                "dt_safety": arm.dt_safety,
+                "strength": arm.strength,
+                "model": str(ds["law"].values[i]),
+                "seed": int(ds["seed"].values[i]),
+                "status": str(ds["status"].values[i]),
             }
+            for c in params:
+                v = ds[c].values[i]
+                row[c] = str(v) if ds[c].dtype.kind in "US" else float(v)
+            if "dt" in ds:
+                row["dt"] = float(ds["dt"].values[i])
+            m = {v: float(ds[v].values[i]) for v in metrics}
+            row.update(m)
+            row.update(derived(m))
+            rows.append(row)
+    return rows
+
+
+def cells(rows: list[dict], arm: str, seeds=None) -> dict[str, dict[str, np.ndarray]]:
+    """``{model: {value: (layouts,) in seed order}}`` of one arm (its worlds that did not
+    complete: NaN); with ``seeds``, those layouts only."""
+    out = {}
+    for label, _ in MODELS:
+        mine = [r for r in rows if r["arm"] == arm and r["model"] == label]
+        if seeds is not None:
+            mine = [r for r in mine if r["seed"] in set(seeds)]
+        mine.sort(key=lambda r: r["seed"])
+        if not mine:
+            continue
+        names = [k for k, v in mine[0].items() if isinstance(v, float) or v is None]
+        cell = {"seed": np.array([r["seed"] for r in mine])}
+        done = np.array([r["status"] == "complete" for r in mine])
+        for k in names:
+            v = np.array([math.nan if r[k] is None else r[k] for r in mine], dtype=float)
+            cell[k] = np.where(done, v, math.nan)  # a world that failed counts nowhere
+        out[label] = cell
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Description of an arm
+# --------------------------------------------------------------------------------------------
+
+
+def proportion(values) -> dict:
+    """``{"k", "n", "value", "ci"}``: successes of the finite 0/1 ``values``, with the exact
+    (Clopper-Pearson) interval."""
+    x = np.asarray(values, dtype=float)
+    x = x[np.isfinite(x)]
+    k, n = int(x.sum()), int(x.size)
+    low, high = inference.clopper_pearson(k, n, CONFIDENCE)
+    return {"k": k, "n": n, "value": k / n if n else math.nan, "ci": [low, high]}
+
+
+def quartiles(values) -> dict:
+    """``{"n", "median", "q25", "q75"}`` of the finite values (NaN if none)."""
+    x = np.asarray(values, dtype=float)
+    x = x[np.isfinite(x)]
+    if not x.size:
+        return {"n": 0, "median": math.nan, "q25": math.nan, "q75": math.nan}
+    q25, med, q75 = np.quantile(x, [0.25, 0.5, 0.75])
+    return {"n": int(x.size), "median": float(med), "q25": float(q25), "q75": float(q75)}
+
+
+def release_curve(cell: dict) -> dict:
+    """Kaplan-Meier of the time from the peak to the largest jam's release, over the
+    layouts that jammed (censored where the run ended first); ``held_to_end``: the
+    estimated share still held at the longest time observed."""
+    jam = cell["jam"] == 1
+    t, seen = cell["release_time"][jam], cell["release_observed"][jam] == 1
+    keep = np.isfinite(t)
+    if not keep.any():
+        return {"n": 0, "events": 0, "median": None, "curve": None}
+    km = inference.kaplan_meier(t[keep], seen[keep])
+    return {
+        "n": int(keep.sum()),
+        "events": int(seen[keep].sum()),
+        "median": km["median"],
+        "curve": km,
+    }
+
+
+DESCRIBED = ("peak_force", "friction_energy", "concentration", "jammed_fraction")
+
+
+def describe(arm_cells: dict) -> dict:
+    """Per model: the 0/1 outcomes' proportions, quartiles of the continuous measures, the
+    release curve."""
+    out = {}
+    for label, cell in arm_cells.items():
+        entry = {
+            name: proportion(cell[name]) for name in ("jam_5kN", "jam", "jam_20kN", "held", "slid")
+        }
+        for name in (*DESCRIBED, "crushing_energy"):
+            if name in cell:
+                entry[name] = quartiles(cell[name])
+        entry["release"] = release_curve(cell)
         out[label] = entry
     return out
 
 
-def _paired(table: dict, a: str, b: str, name: str, transform=None) -> np.ndarray:
-    """Per layout and fraction, ``name`` under model ``a`` minus under ``b`` (transformed)."""
-    diffs = []
-    for f in table[a]:
-        x, y = table[a][f][name], table[b][f][name]
-        if transform is not None:
-            x, y = transform(x), transform(y)
-        diffs.append(x - y)
-    return np.concatenate(diffs)
+# --------------------------------------------------------------------------------------------
+# Claims
+# --------------------------------------------------------------------------------------------
 
 
 def _log10_force(f: np.ndarray) -> np.ndarray:
-    # 1 N floor: a run that never touches the pillar has a peak of 0.
-    return np.log10(np.maximum(f, 1.0))
+    return np.log10(np.maximum(f, FORCE_FLOOR))
 
 
-def claims(table: dict) -> list[dict]:
-    """The paper's claims as statements on the study's runs (module docstring)."""
+def one_proportion(values, direction: int) -> dict:
+    """A claim on one model's proportion against 1/2: the exact binomial test, the
+    proportion with its exact interval (effect: the proportion minus 1/2), the layouts that
+    80 % power would need at the observed proportion."""
+    p = proportion(values)
+    test = inference.binomial_test(p["k"], p["n"], 0.5) if p["n"] else 1.0
+    return {
+        "test": "exact binomial, against 1/2",
+        "n": p["n"],
+        "effect": p["value"] - 0.5 if p["n"] else math.nan,
+        "ci": [p["ci"][0] - 0.5, p["ci"][1] - 0.5],
+        "counts": f"{p['k']} of {p['n']}",
+        "p": test,
+        "n_needed": inference.binomial_n(p["value"], 0.5, ALPHA, POWER) if p["n"] else None,
+        "direction": direction,
+    }
+
+
+def paired_binary(a, b, direction: int) -> dict:
+    """A claim that model A's 0/1 outcome is more (``direction`` +1) or less (-1) frequent
+    than B's on the same layouts: the exact McNemar test; effect: the paired difference of
+    proportions, with the exact interval of the share of discordant layouts where A alone
+    has it (read against 1/2: the conditional odds ratio's exact interval)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    keep = np.isfinite(a) & np.isfinite(b)
+    test = inference.mcnemar(a[keep] == 1, b[keep] == 1)
+    n, only_a, only_b = test["n"], test["only_a"], test["only_b"]
+    discordant = only_a + only_b
+    low, high = inference.clopper_pearson(only_a, discordant, CONFIDENCE)
+    return {
+        "test": "exact McNemar",
+        "n": n,
+        "effect": (only_a - only_b) / n if n else math.nan,
+        "ci": [low - 0.5, high - 0.5],
+        "ci_of": "share of the discordant layouts where the first model alone has it, - 1/2",
+        "counts": f"{test['a']} vs {test['b']} of {n} ({only_a} vs {only_b} discordant)",
+        "p": test["p"],
+        "n_needed": inference.mcnemar_pairs(only_a / n, only_b / n, ALPHA, POWER)
+        if n and only_a != only_b
+        else None,
+        "direction": direction,
+    }
+
+
+def paired_continuous(a, b, direction: int, transform=None) -> dict:
+    """A claim that model A's measure is larger (+1) or smaller (-1) than B's on the same
+    layouts: the Wilcoxon signed-rank test; effect: the mean paired difference (of
+    ``transform``ed values) with its percentile bootstrap interval over layouts."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if transform is not None:
+        a, b = transform(a), transform(b)
+    d = a - b
+    d = d[np.isfinite(d)]
+    est, low, high = bootstrap_ci(d)
+    nonzero = d[d != 0]
+    test = inference.wilcoxon(nonzero) if nonzero.size else {"p": 1.0}
+    sd = float(np.std(d, ddof=1)) if d.size > 1 else math.nan
+    return {
+        "test": "Wilcoxon signed-rank",
+        "n": int(d.size),
+        "effect": est,
+        "ci": [low, high],
+        "median": float(np.median(d)) if d.size else math.nan,
+        "p": float(test["p"]),
+        "n_needed": inference.paired_pairs(est, sd, ALPHA, POWER)
+        if d.size > 1 and sd > 0 and est != 0
+        else None,
+        "direction": direction,
+    }
+
+
+def stratum_claims(c: dict) -> list[dict]:
+    """The paper's claims on one stratum's cells ``c`` (``cells``), each with its test."""
     out = []
 
-    def add(claim, paper, statement, values, direction, unit, role=None, model=None):
-        est = _estimate(values)
-        low, high = est["ci"]
+    def add(claim, paper, statement, result, model=None):
+        role = RATE_STATE_ROLES.get(model)
         out.append(
             {
                 "claim": claim,
                 "paper": paper,
                 "statement": statement,
-                "effect": est["value"],
-                "ci": [low, high],
-                "n": est["n"],
-                "unit": unit,
-                "verdict": verdict(low, high, direction),
+                **result,
                 **({"model": model, "role": role} if model else {}),
             }
         )
 
-    p01 = pooled(table["mu0.1"], "peak_force")
+    def jammed(model, name):
+        cell = c[model]
+        return np.where(cell["jam"] == 1, cell[name], np.nan)
+
     add(
         "mu = 0.1: blocks slide easily past the pillar",
         "forces never higher than 1 kN",
-        "P(peak force <= 1 kN) at mu = 0.1, minus 1/2 (> 0: in most layouts)",
-        np.where(np.isfinite(p01), (p01 <= FREE_FORCE).astype(float), np.nan) - 0.5,
-        +1,
-        "probability",
+        "share of layouts with a peak force <= 1 kN at mu = 0.1 (> 1/2: most)",
+        one_proportion(c["mu0.1"]["slid"], +1),
     )
     add(
         "mu = 0.9: the blocks jam",
         "the blocks jam",
-        "P(jam) at mu = 0.9, minus 1/2 (> 0: in most layouts)",
-        pooled(table["mu0.9"], "jam") - 0.5,
-        +1,
-        "probability",
+        "share of layouts that jam (peak > 10 kN) at mu = 0.9 (> 1/2: most)",
+        one_proportion(c["mu0.9"]["jam"], +1),
     )
     add(
         "mu = 0.9: the jam is never broken",
         "the jam is never broken",
-        "P(jam broken by the end, given a jam) at mu = 0.9, minus 1/2 (< 0: most hold)",
-        pooled(table["mu0.9"], "broken") - 0.5,
-        -1,
-        "probability",
+        "share of the jams at mu = 0.9 released before the end (< 1/2: most hold)",
+        one_proportion(jammed("mu0.9", "release_observed"), -1),
     )
     add(
         "mu = 0.5: jams form and break",
         "jams form and break",
-        "P(jam broken by the end, given a jam) at mu = 0.5, minus 1/2 (> 0: most break)",
-        pooled(table["mu0.5"], "broken") - 0.5,
-        +1,
-        "probability",
+        "share of the jams at mu = 0.5 released before the end (> 1/2: most break)",
+        one_proportion(jammed("mu0.5", "release_observed"), +1),
     )
     add(
         "higher friction jams more",
         "mu = 0.9 jams where mu = 0.1 slides",
-        "P(jam) at mu = 0.9 minus at mu = 0.1, paired by layout",
-        _paired(table, "mu0.9", "mu0.1", "jam"),
-        +1,
-        "probability",
+        "jam at mu = 0.9 against at mu = 0.1, paired by layout",
+        paired_binary(c["mu0.9"]["jam"], c["mu0.1"]["jam"], +1),
     )
-    for model, role in RATE_STATE_ROLES.items():
-        add(
-            "rate-and-state releases jams more easily than mu = 0.9",
-            "jams form and break (mu = 0.9: never broken)",
-            f"P(jam held at the end), {model} minus mu = 0.9, paired by layout",
-            _paired(table, model, "mu0.9", "held"),
-            -1,
-            "probability",
-            role,
-            model,
-        )
-        add(
-            "rate-and-state releases jams more easily than mu = 0.5",
-            "jams form and break",
-            f"P(jam held at the end), {model} minus mu = 0.5, paired by layout",
-            _paired(table, model, "mu0.5", "held"),
-            -1,
-            "probability",
-            role,
-            model,
-        )
+    for model in RATE_STATE_ROLES:
+        for other in ("mu0.9", "mu0.5"):
+            name = "0.9" if other == "mu0.9" else "0.5"
+            add(
+                f"rate-and-state releases jams more easily than mu = {name}",
+                "jams form and break" + (" (mu = 0.9: never broken)" if name == "0.9" else ""),
+                f"a jam still held at the end, {model} against mu = {name}, paired by layout",
+                paired_binary(c[model]["held"], c[other]["held"], -1),
+                model,
+            )
+            add(
+                f"rate-and-state is jammed for less of the time than mu = {name}",
+                "jams form and break",
+                f"share of the 20 s above 10 kN, {model} minus mu = {name}, paired by layout",
+                paired_continuous(c[model]["jammed_fraction"], c[other]["jammed_fraction"], -1),
+                model,
+            )
         add(
             "rate-and-state gives lower peak forces than mu = 0.9",
             "force and energy loss rise dramatically at mu = 0.9",
-            f"mean log10(peak force {model} / peak force mu = 0.9), paired by layout",
-            _paired(table, model, "mu0.9", "peak_force", _log10_force),
-            -1,
-            "log10 ratio",
-            role,
+            f"log10(peak force, {model} / mu = 0.9), paired by layout",
+            paired_continuous(c[model]["peak_force"], c["mu0.9"]["peak_force"], -1, _log10_force),
             model,
         )
         add(
             "rate-and-state dissipates more steadily than mu = 0.5",
             "frictional loss rises more steadily than for mu = 0.5 (two events)",
-            f"largest 1-s share of frictional energy, {model} minus mu = 0.5, paired by layout",
-            _paired(table, model, "mu0.5", "concentration"),
-            -1,
-            "share",
-            role,
+            f"largest 1-s share of the frictional energy, {model} minus mu = 0.5, paired",
+            paired_continuous(c[model]["concentration"], c["mu0.5"]["concentration"], -1),
             model,
         )
     return out
 
 
+def verdict(p_adjusted: float, effect: float, direction: int) -> str:
+    """'holds' when the adjusted p is at most ALPHA and the effect lies on the claimed side
+    (``direction`` +1 or -1), 'contradicted' on the other side, else 'undecided'."""
+    if not (math.isfinite(p_adjusted) and math.isfinite(effect)) or p_adjusted > ALPHA:
+        return "undecided"
+    if direction * effect > 0:
+        return "holds"
+    if direction * effect < 0:
+        return "contradicted"
+    return "undecided"
+
+
+def family(claim_lists: dict[str, list[dict]]) -> list[dict]:
+    """The claims of several strata (``{stratum label: claims}``) as one family: Holm's
+    adjustment over all of them, and each one's verdict."""
+    flat = [{**c, "stratum": s} for s, cs in claim_lists.items() for c in cs]
+    adjusted = inference.holm([c["p"] for c in flat]) if flat else []
+    for c, p in zip(flat, adjusted):
+        c["p_holm"] = p
+        c["verdict"] = verdict(p, c["effect"], c["direction"])
+    return flat
+
+
 def carriers(claim_list: list[dict]) -> list[dict]:
-    """For each rate-and-state claim: which of rate, memory or both carries its effect."""
+    """For each rate-and-state claim in each stratum: which of rate, memory or both carries
+    its effect (the verdicts of rate-and-state, the steady-state law and memory only)."""
     out = []
-    for claim in dict.fromkeys(c["claim"] for c in claim_list if "model" in c):
-        v = {c["model"]: c["verdict"] for c in claim_list if c["claim"] == claim}
+    keys = dict.fromkeys((c["stratum"], c["claim"]) for c in claim_list if "model" in c)
+    for stratum, claim in keys:
+        v = {
+            c["model"]: c["verdict"]
+            for c in claim_list
+            if c["claim"] == claim and c["stratum"] == stratum
+        }
         rs, rate, memory = v["rate-state"], v["steady-state"], v["memory-only"]
         if rs != "holds":
             carrier = f"no effect to carry (rate-and-state: {rs})"
@@ -373,5 +442,57 @@ def carriers(claim_list: list[dict]) -> list[dict]:
             carrier = "memory (memory only shows it, the steady-state law does not)"
         else:
             carrier = "rate and memory together (neither alone shows it)"
-        out.append({"claim": claim, "verdicts": v, "carried_by": carrier})
+        out.append({"stratum": stratum, "claim": claim, "verdicts": v, "carried_by": carrier})
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# The step's bias
+# --------------------------------------------------------------------------------------------
+
+
+def step_bias(default: dict, half: dict, stratum: dict) -> list[dict]:
+    """The half step against the default on the same layouts, per model and measure (module
+    docstring). ``default`` and ``half``: cells on the same seeds; ``stratum``: the default
+    step's cells on all the stratum's layouts (their standard error is the claims' sampling
+    error). Holm's adjustment over the Wilcoxon tests of every row."""
+    rows = []
+    for label in half:
+        a, b = default[label], half[label]
+        for name in STEP_MEASURES:
+            x, y = a[name], b[name]
+            keep = np.isfinite(x) & np.isfinite(y)
+            x, y = x[keep], y[keep]
+            if x.size < 2:
+                continue
+            d = y - x
+            mean = float(np.mean(x))
+            est, low, high = bootstrap_ci(d)
+            nonzero = d[d != 0]
+            full = stratum[label][name]
+            full = full[np.isfinite(full)]
+            se = float(np.std(full, ddof=1) / np.sqrt(full.size)) if full.size > 1 else math.nan
+            rows.append(
+                {
+                    "model": label,
+                    "measure": name,
+                    "n": int(x.size),
+                    "default_mean": mean,
+                    "shift": est,
+                    "ci": [low, high],
+                    "relative": est / mean if mean else math.nan,
+                    "wilcoxon_p": float(inference.wilcoxon(nonzero)["p"]) if nonzero.size else 1.0,
+                    "ks": inference.ks_2samp(x, y),
+                    "quantiles": inference.quantile_shift(x, y, seed=BOOTSTRAP_SEED),
+                    "stratum_n": int(full.size),
+                    "stratum_se": se,
+                    "shift_over_se": abs(est) / se if se > 0 else math.nan,
+                }
+            )
+        for name in ("jam", "held"):
+            test = inference.mcnemar(a[name] == 1, b[name] == 1)
+            rows.append({"model": label, "measure": name, "mcnemar": test})
+    tested = [r for r in rows if "wilcoxon_p" in r]
+    for r, p in zip(tested, inference.holm([r["wilcoxon_p"] for r in tested])):
+        r["wilcoxon_p_holm"] = p
+    return rows

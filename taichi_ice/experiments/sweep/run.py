@@ -376,6 +376,22 @@ def _keep(metrics: dict, names: Sequence[str]) -> dict:
     return {k: metrics[k] for k in names}
 
 
+def local_cluster(workers: int):
+    """A Dask ``LocalCluster`` of ``workers`` single-threaded worker processes; Taichi's own
+    thread pool in each gets an equal share of the cores. (A caller that runs several sweeps
+    passes its address as ``scheduler``, so the workers keep Taichi and their Worlds warm.)"""
+    from dask.distributed import LocalCluster
+
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    return LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        env={"TI_CPU_MAX_NUM_THREADS": str(threads)},
+    )
+
+
 def _execute(specs: list[dict], workers: int, scheduler: str | None, say):
     """Yield ``(spec, result, error)`` for every batch as it completes."""
     if scheduler is None and workers == 0:
@@ -387,20 +403,11 @@ def _execute(specs: list[dict], workers: int, scheduler: str | None, say):
             except TaichiIceError as exc:
                 yield spec, None, str(exc)
         return
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, as_completed
 
     cluster = None
     if scheduler is None:
-        # One single-threaded worker process per slot; Taichi's own thread pool in each gets
-        # an equal share of the cores.
-        threads = max(1, (os.cpu_count() or 1) // workers)
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            env={"TI_CPU_MAX_NUM_THREADS": str(threads)},
-        )
+        cluster = local_cluster(workers)
         client = Client(cluster)
     else:
         try:

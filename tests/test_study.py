@@ -166,7 +166,8 @@ def test_claims_and_carriers_on_a_study_with_known_answers(summary):
         assert by[(f, "mu = 0.9: the jam is never broken", None)]["verdict"] == "holds"
         assert by[(f, "mu = 0.5: jams form and break", None)]["verdict"] == "contradicted"
         more = by[(f, "higher friction jams more", None)]
-        assert more["effect"] == 1.0 and more["verdict"] == "holds"
+        assert more["effect"] == 0.5 and more["difference"] == 1.0
+        assert more["verdict"] == "holds"
         assert more["p"] == pytest.approx(2.0 / 2**LAYOUTS)
         release = "rate-and-state releases jams more easily than mu = 0.9"
         assert by[(f, release, "rate-state")]["verdict"] == "holds"

@@ -315,9 +315,10 @@ def study_markdown(s: dict) -> str:
             f"{s['alpha']:g} over the {len(claims)} claims of this table, and the effect on the "
             "claimed side; contradicted: on the other side; else undecided. Effects: "
             "one-proportion claims, the proportion - 1/2 [exact CI]; paired 0/1 outcomes, the "
-            "difference of proportions [exact CI of the discordant split - 1/2]; measures, the "
-            "mean paired difference [bootstrap CI]. The last numeric column: layouts run, and "
-            f"layouts for {s['power']:.0%} power at the observed effect.",
+            "share of the discordant layouts (one model alone has it) that are the first "
+            "model's - 1/2 [exact CI]; measures, the mean paired difference [bootstrap CI]. "
+            "The last numeric column: layouts run, and layouts for "
+            f"{s['power']:.0%} power at the observed effect.",
             "",
         ]
         lines += [*claims_table(claims), ""]

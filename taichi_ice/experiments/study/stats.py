@@ -262,9 +262,10 @@ def one_proportion(values, direction: int) -> dict:
 
 def paired_binary(a, b, direction: int) -> dict:
     """A claim that model A's 0/1 outcome is more (``direction`` +1) or less (-1) frequent
-    than B's on the same layouts: the exact McNemar test; effect: the paired difference of
-    proportions, with the exact interval of the share of discordant layouts where A alone
-    has it (read against 1/2: the conditional odds ratio's exact interval)."""
+    than B's on the same layouts: the exact McNemar test. Effect: the share of the
+    discordant layouts (those where one model alone has it) where it is A's, minus 1/2, with
+    its exact interval (the conditional odds ratio's, read on the share's scale); the counts
+    give each model's proportion (their difference is the discordant counts' over n)."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     keep = np.isfinite(a) & np.isfinite(b)
     test = inference.mcnemar(a[keep] == 1, b[keep] == 1)
@@ -274,10 +275,10 @@ def paired_binary(a, b, direction: int) -> dict:
     return {
         "test": "exact McNemar",
         "n": n,
-        "effect": (only_a - only_b) / n if n else math.nan,
+        "effect": only_a / discordant - 0.5 if discordant else math.nan,
         "ci": [low - 0.5, high - 0.5],
-        "ci_of": "share of the discordant layouts where the first model alone has it, - 1/2",
-        "counts": f"{test['a']} vs {test['b']} of {n} ({only_a} vs {only_b} discordant)",
+        "difference": (only_a - only_b) / n if n else math.nan,
+        "counts": f"{test['a']} vs {test['b']} of {n}; discordant {only_a} vs {only_b}",
         "p": test["p"],
         "n_needed": inference.mcnemar_pairs(only_a / n, only_b / n, ALPHA, POWER)
         if n and only_a != only_b

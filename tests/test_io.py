@@ -33,7 +33,20 @@ SERIES = {
     "n_contacts",
 }
 FRAMES = {"time", "position", "angle", "velocity", "omega"}
-BODIES = {"names", "kinds", "vertices", "vertex_offsets", "mass", "inertia", "probe_index"}
+BODIES = {
+    "names",
+    "kinds",
+    "vertices",
+    "vertex_offsets",
+    "mass",
+    "inertia",
+    "probe_index",
+    # The floes at time 0 as a CF-1.8 polygon geometry (tests/test_cf_geometry.py).
+    "floe_outline",
+    "floe_outline_node_count",
+    "floe_outline_x",
+    "floe_outline_y",
+}
 ROOT_ATTRS = {
     "taichi_ice_version",
     "scenario",

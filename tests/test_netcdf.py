@@ -93,3 +93,29 @@ def test_provenance_names_versions_command_host_times_and_the_arch_that_ran(run_
     assert a["started"] <= a["finished"] and a["finished"].endswith("Z")
     assert "git_revision" in a
     assert a["arch"] == backend.actual_arch()
+
+
+def test_cf_tools_read_the_floes_of_the_first_frame(run_file, taichi_runtime):
+    """cf_xarray reads the CF-1.8 polygons of the file (tests/test_cf_geometry.py): the floes
+    where the run's first frame has them, at time 0."""
+    cf_xarray = pytest.importorskip("cf_xarray")
+    shapely = pytest.importorskip("shapely")
+    from shapely import affinity
+
+    with (
+        xr.open_dataset(run_file, group="bodies") as b,
+        xr.open_dataset(run_file, group="frames") as fr,
+    ):
+        geoms = cf_xarray.cf_to_shapely(b, container=b["mass"].attrs["geometry"]).values
+        off, vertices = b["vertex_offsets"].values, b["vertices"].values
+        assert fr["time"].values[0] == 0.0
+        position, angle = fr["position"].values[0], fr["angle"].values[0]
+    # Frames hold the run's numbers: a float32 run rounded the scene's positions and angles.
+    atol = 1e-12 if taichi_runtime[1] == "f64" else 1e-6
+    assert len(geoms) == len(off) - 1 == 2
+    for i, got in enumerate(geoms):
+        want = shapely.Polygon(vertices[off[i] : off[i + 1]])
+        want = affinity.rotate(want, angle[i], origin=(0.0, 0.0), use_radians=True)
+        want = affinity.translate(want, *position[i])
+        assert got.exterior.is_ccw
+        np.testing.assert_allclose(got.exterior.coords, want.exterior.coords, rtol=0, atol=atol)

@@ -22,7 +22,15 @@ Layout (one file per world; DESIGN.md section 3):
 - ``/frames/``: ``time`` (F,), ``position`` (F, N, 2), ``angle`` (F, N), ``velocity``
   (F, N, 2), ``omega`` (F, N); every body in scene order.
 - ``/bodies/``: ``names``, ``kinds``, ``vertices`` (V, 2) centroid-relative outlines and
-  ``vertex_offsets`` (N + 1,), ``mass`` (kg), ``inertia`` (kg m^2), ``probe_index`` (P,).
+  ``vertex_offsets`` (N + 1,), ``mass`` (kg), ``inertia`` (kg m^2), ``probe_index`` (P,);
+  and the floes as CF-1.8 polygon geometries (CF section 7.5, "Geometries"; format 2.1 on):
+  the container ``floe_outline`` (scalar: ``geometry_type = "polygon"``, ``node_count``,
+  ``node_coordinates``), ``floe_outline_node_count`` (N,) and the nodes ``floe_outline_x``,
+  ``floe_outline_y`` (V,: ``axis`` X and Y, m): every outline in the world as the scene
+  places it at time 0 (``vertices`` turned by the scene's angle and moved to its position),
+  anticlockwise (CF's right-hand rule for exterior rings), its first node not repeated.
+  ``names``, ``kinds``, ``mass`` and ``inertia`` carry ``geometry = "floe_outline"``. Convex
+  floes are single polygons without holes: no ``part_node_count`` or ``interior_ring``.
 
 Every variable has ``units`` (but the strings) and ``long_name``; each group's ``time`` is its
 dimension. ``xarray.open_dataset(path, group="series")`` (and ``"frames"``, ``"bodies"``)
@@ -62,14 +70,16 @@ __all__ = [
     "DIMS",
     "DISK_RESERVE",
     "FORMAT_VERSION",
+    "GEOMETRY",
     "VARIABLES",
     "DiskFullError",
     "RunWriter",
     "check_room",
 ]
 
-# Version of this layout; a reader refuses a file with another major version.
-FORMAT_VERSION = "2.0"
+# Version of this layout; a reader refuses a file with another major version. 2.1: the
+# floes as CF geometries in /bodies (added only: every reader reads 2.0 files as before).
+FORMAT_VERSION = "2.1"
 CONVENTIONS = "CF-1.8"
 
 # (units, long_name) of every variable; "" units for strings (CF gives them none).
@@ -112,8 +122,27 @@ VARIABLES: dict[str, dict[str, tuple[str, str]]] = {
         "mass": ("kg", "mass"),
         "inertia": ("kg m2", "moment of inertia about the centroid"),
         "probe_index": ("1", "body index of each probe body"),
+        "floe_outline": ("1", "floe outlines at time 0: CF geometry container"),
+        "floe_outline_node_count": ("1", "number of outline nodes of each floe"),
+        "floe_outline_x": ("m", "x of the floe outline nodes in the world at time 0"),
+        "floe_outline_y": ("m", "y of the floe outline nodes in the world at time 0"),
     },
 }
+# The floes as CF-1.8 polygon geometries (CF section 7.5): the container's attributes, and
+# the per-body variables (on the instance dimension, body) that it describes.
+GEOMETRY = "floe_outline"
+_GEOMETRY_ATTRS = {
+    "geometry_type": "polygon",
+    "node_count": "floe_outline_node_count",
+    "node_coordinates": "floe_outline_x floe_outline_y",
+    "comment": (
+        "every floe's outline in the world as the scene places it at time 0 (/bodies/vertices "
+        "turned by the body's initial angle and moved to its initial centroid), anticlockwise, "
+        "the first node not repeated; a frame's outlines are vertices turned by "
+        "/frames/angle and moved to /frames/position"
+    ),
+}
+_GEOMETRY_OF = ("names", "kinds", "mass", "inertia")
 # Dimensions of each variable (the first of a series or frame is its group's time).
 DIMS: dict[str, dict[str, tuple[str, ...]]] = {
     "series": {"probe_force": ("time", "probe", "xy")},
@@ -131,6 +160,10 @@ DIMS: dict[str, dict[str, tuple[str, ...]]] = {
         "mass": ("body",),
         "inertia": ("body",),
         "probe_index": ("probe",),
+        "floe_outline": (),
+        "floe_outline_node_count": ("body",),
+        "floe_outline_x": ("vertex",),
+        "floe_outline_y": ("vertex",),
     },
 }
 # Attributes every run file has from its start (so a reader always finds them).
@@ -289,9 +322,12 @@ class RunWriter:
         b["mass"] = scene.masses
         b["inertia"] = scene.inertias
         b["probe_index"] = np.asarray(scene.probe_indices, dtype=np.int64)
+        _geometry(b, scene)
         for name, ds in b.items():
             _describe(ds, "bodies", name)
             _attach(f, ds, DIMS["bodies"][name])
+        for name in _GEOMETRY_OF:
+            b[name].attrs["geometry"] = GEOMETRY
 
         shapes = {
             "series": {
@@ -408,6 +444,21 @@ class RunWriter:
             )
         if full is not None:
             raise full
+
+
+def _geometry(b: h5py.Group, scene) -> None:
+    """The floes at time 0 as a CF-1.8 polygon geometry (container, node count, nodes)."""
+    from .export import floe_polygons
+
+    offsets = np.asarray(scene.vertex_offsets, dtype=np.int64)
+    vertices = np.asarray(scene.vertices_flat, dtype=np.float64).reshape(-1, 2)
+    nodes = floe_polygons(vertices, offsets, scene.positions, scene.angles)
+    b[GEOMETRY] = np.int32(0)  # a container of attributes; its value means nothing
+    b[GEOMETRY].attrs.update(_GEOMETRY_ATTRS)
+    b["floe_outline_node_count"] = np.diff(offsets)
+    for axis, name in enumerate(("floe_outline_x", "floe_outline_y")):
+        b[name] = nodes[:, axis]
+        b[name].attrs["axis"] = "XY"[axis]
 
 
 def _describe(ds, group: str, name: str) -> None:

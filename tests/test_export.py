@@ -1,10 +1,13 @@
 """``taichi-ice export RUN --vtk DIR``: the floes of every frame as VTK PolyData for ParaView.
 
-The files are read back here with an independent reader (xml.etree, base64 and NumPy, no VTK
-code of the package) and each polygon is held against shapely's polygon of the body's stored
-outline, turned to the frame's angle and moved to its centroid (shapely.affinity). The run
-file is written with the package's RunWriter from a landed scene and made-up frames, so no
-Taichi is needed.
+The files are read back here with two independent readers: our own (xml.etree, base64 and
+NumPy, no VTK code of the package) and VTK's own vtkXMLPolyDataReader (the reader ParaView
+uses; the ``vtk`` package, test-only), and each polygon is held against shapely's polygon of
+the body's stored outline, turned to the frame's angle and moved to its centroid
+(shapely.affinity). meshio reads no PolyData (.vtp), and VTK has no reader of ``.pvd``
+collections (ParaView's own): the collection is read with xml.etree and each file it names
+with VTK. The run file is written with the package's RunWriter from a landed scene and
+made-up frames, so no Taichi is needed.
 """
 
 from __future__ import annotations
@@ -78,6 +81,8 @@ def read_vtp(path: Path) -> dict:
         "points": read_array(piece.find("Points/DataArray")),
         "time": float(read_array(root.find("PolyData/FieldData/DataArray"))[0, 0]),
     }
+    # VTK reads a field array without its NumberOfTuples as empty.
+    assert root.find("PolyData/FieldData/DataArray").get("NumberOfTuples") == "1"
     for a in piece.find("Polys"):
         out[a.get("Name")] = read_array(a).ravel()
     out["cells"] = {a.get("Name"): read_array(a) for a in piece.find("CellData")}
@@ -129,6 +134,72 @@ def test_every_frame_is_the_floes_as_polygons_with_their_motion(run_file, tmp_pa
         np.testing.assert_array_equal(cells["angular_velocity"][:, 0], run["frames"]["omega"][f])
         np.testing.assert_array_equal(cells["body"][:, 0], np.arange(n))
         np.testing.assert_array_equal(cells["kind"][:, 0], kinds)
+
+
+def read_with_vtk(path: Path):
+    """``path`` read by VTK's vtkXMLPolyDataReader: the vtkPolyData, and whatever VTK wrote
+    to its output window (errors and warnings) while reading."""
+    from vtkmodules.vtkCommonCore import vtkOutputWindow, vtkStringOutputWindow
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    before = vtkOutputWindow.GetInstance()
+    window = vtkStringOutputWindow()
+    vtkOutputWindow.SetInstance(window)
+    try:
+        reader = vtkXMLPolyDataReader()
+        reader.SetFileName(str(path))
+        reader.Update()
+    finally:
+        vtkOutputWindow.SetInstance(before)
+    return reader.GetOutput(), window.GetOutput()
+
+
+@pytest.mark.parametrize("binary", [True, False], ids=["binary", "ascii"])
+def test_vtk_reads_every_frame_as_the_floes_with_their_motion_and_time(run_file, tmp_path, binary):
+    pytest.importorskip("vtkmodules.vtkIOXML")
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    pvd = export_vtk(run_file, tmp_path / "vtk", binary=binary)
+    run = read_run(run_file)
+    frames, times = run["frames"], run["frames"]["time"]
+    kinds = [KIND_CODES[k] for k in run["bodies"]["kinds"]]
+    counts = np.diff(run["bodies"]["vertex_offsets"])
+    n = len(counts)
+    sets = ET.parse(pvd).getroot().findall("Collection/DataSet")
+    assert len(sets) == N_FRAMES
+    for f, entry in enumerate(sets):
+        assert float(entry.get("timestep")) == times[f]
+        data, errors = read_with_vtk(pvd.parent / entry.get("file"))
+        assert errors == "", errors
+        assert data.GetNumberOfPoints() == counts.sum()
+        assert data.GetNumberOfCells() == data.GetNumberOfPolys() == n
+        assert data.GetNumberOfVerts() == data.GetNumberOfLines() == data.GetNumberOfStrips() == 0
+        points = vtk_to_numpy(data.GetPoints().GetData())
+        assert points.shape == (counts.sum(), 3) and np.all(points[:, 2] == 0.0)
+        for i, want in enumerate(expected_polygons(run, f)):
+            ids = data.GetCell(i).GetPointIds()
+            xy = points[[ids.GetId(k) for k in range(ids.GetNumberOfIds())], :2]
+            assert len(xy) == counts[i]
+            np.testing.assert_allclose(xy, np.asarray(want.exterior.coords)[:-1], atol=1e-12)
+            assert shapely.Polygon(xy).exterior.is_ccw
+        cells = data.GetCellData()
+        names = {cells.GetArrayName(k) for k in range(cells.GetNumberOfArrays())}
+        assert names == {"velocity", "angular_velocity", "body", "kind"}
+        assert cells.GetVectors().GetName() == "velocity"
+        assert cells.GetScalars().GetName() == "angular_velocity"
+        velocity = vtk_to_numpy(cells.GetArray("velocity"))
+        np.testing.assert_array_equal(velocity[:, :2], frames["velocity"][f])
+        assert np.all(velocity[:, 2] == 0.0)
+        got = {k: vtk_to_numpy(cells.GetArray(k)) for k in ("angular_velocity", "body", "kind")}
+        np.testing.assert_array_equal(got["angular_velocity"], frames["omega"][f])
+        np.testing.assert_array_equal(got["body"], np.arange(n))
+        np.testing.assert_array_equal(got["kind"], kinds)
+        assert data.GetPointData().GetNumberOfArrays() == 0
+        # The frame's time as the field data ParaView reads (VTK reads a field array that
+        # does not say its NumberOfTuples as empty).
+        time = data.GetFieldData().GetArray("TimeValue")
+        assert time is not None and time.GetNumberOfTuples() == 1
+        assert vtk_to_numpy(time)[0] == times[f]
 
 
 def test_the_command_writes_the_collection_and_never_clobbers_an_export(run_file, tmp_path, capsys):

@@ -19,7 +19,8 @@ output, which run files do not hold yet; only the floes are written.
 Plain NumPy and the standard library (no VTK package): arrays are written inline, as
 base64 of little-endian bytes behind a UInt64 byte count (VTK's "binary" format), or as text
 (``binary=False``). Each file is written under a temporary name and renamed, the ``.pvd``
-last, so an interrupted export never leaves a collection that names missing frames.
+last, so an interrupted export never leaves a collection that names missing frames. VTK's
+own vtkXMLPolyDataReader reads every file back in tests/test_export.py.
 """
 
 from __future__ import annotations
@@ -63,12 +64,23 @@ def floe_polygons(vertices: np.ndarray, offsets: np.ndarray, position, angle) ->
     return np.stack([c * x - s * y, s * x + c * y], axis=1) + position[owner]
 
 
-def _array(name: str | None, data: np.ndarray, components: int, binary: bool, indent: str) -> str:
+def _array(
+    name: str | None,
+    data: np.ndarray,
+    components: int,
+    binary: bool,
+    indent: str,
+    field: bool = False,
+) -> str:
+    """One DataArray; ``field``: of FieldData, whose arrays must say their NumberOfTuples
+    (VTK's XML readers take a field array without it as empty)."""
     data = np.ascontiguousarray(data)
     data = data.astype(data.dtype.newbyteorder("<"), copy=False)
     kind = _VTK_TYPES[data.dtype]
     named = f" Name={quoteattr(name)}" if name else ""
     head = f'{indent}<DataArray type="{kind}"{named} NumberOfComponents="{components}"'
+    if field:
+        head += f' NumberOfTuples="{data.size // components}"'
     if binary:
         raw = data.tobytes()
         blob = base64.b64encode(np.uint64(len(raw)).astype("<u8").tobytes() + raw).decode()
@@ -90,7 +102,7 @@ def _polydata(points, offsets, cells: Mapping[str, tuple[np.ndarray, int]], time
         '<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64">\n',
         "  <PolyData>\n",
         "    <FieldData>\n",
-        _array("TimeValue", np.array([time], dtype="<f8"), 1, binary, "      "),
+        _array("TimeValue", np.array([time], dtype="<f8"), 1, binary, "      ", field=True),
         "    </FieldData>\n",
         f'    <Piece NumberOfPoints="{n_points}" NumberOfVerts="0" NumberOfLines="0" '
         f'NumberOfStrips="0" NumberOfPolys="{n_polys}">\n',

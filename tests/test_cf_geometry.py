@@ -1,8 +1,10 @@
 """The floes of a run file as CF-1.8 polygon geometries (CF conventions section 7.5,
-"Geometries"), read back by an independent reader, cf_xarray, into shapely polygons held
-against shapely's own: each body's scene outline turned by its angle about its centroid and
-moved to its position (shapely.affinity). A run file of format 2.0 (before the geometries)
-is still read by every reader of the package.
+"Geometries"), read back by independent readers into shapely polygons held against
+shapely's own: each body's scene outline turned by its angle about its centroid and moved to
+its position (shapely.affinity). The readers: cf_xarray, and GDAL's netCDF driver (ogr2ogr,
+where GDAL's command-line tools are installed: GDAL reads geometries in the root group only,
+so from a copy of /bodies at the root). A run file of format 2.0 (before the geometries) is
+still read by every reader of the package.
 
 The run files are written with the package's RunWriter from a scene and made-up frames, so no
 Taichi kernel runs here.
@@ -11,6 +13,9 @@ Taichi kernel runs here.
 from __future__ import annotations
 
 import copy
+import json
+import shutil
+import subprocess
 from pathlib import Path
 
 import h5py
@@ -89,19 +94,23 @@ def test_cf_xarray_reads_every_floe_as_the_scenes_polygon(floes):
         geoms = cf_xarray.cf_to_shapely(ds, container="floe_outline")
         counts = ds["floe_outline_node_count"].values
     assert geoms.dims == ("body",) and geoms.size == scene.n_bodies == 4
-    np.testing.assert_array_equal(counts, [len(b.vertices) for b in scene.bodies])
+    # Each ring closed: its first node again at its end.
+    np.testing.assert_array_equal(counts, [len(b.vertices) + 1 for b in scene.bodies])
     for body, got in zip(scene.bodies, geoms.values):
         want = scene_polygon(body)
         assert isinstance(got, shapely.Polygon) and not got.interiors, body.name
         # CF 1.8, 7.5: exterior rings anticlockwise (the right-hand rule).
         assert got.is_valid and got.exterior.is_ccw, body.name
-        # The file holds each node once; shapely closes the ring with the first node again.
         coords = np.asarray(got.exterior.coords)
         assert len(coords) == len(body.vertices) + 1, body.name
         np.testing.assert_allclose(coords, want.exterior.coords, rtol=0, atol=ATOL)
         assert got.area == pytest.approx(shapely.Polygon(body.vertices).area, rel=1e-12)
         assert got.area == pytest.approx(want.area, rel=1e-12)
         assert got.centroid.distance(shapely.Point(body.position)) < ATOL, body.name
+    # open_run's Dataset (every group in one) holds the same geometry.
+    merged = cf_xarray.cf_to_shapely(open_run(path), container="floe_outline")
+    assert merged.size == geoms.size
+    assert all(a.equals_exact(b, 0.0) for a, b in zip(merged.values, geoms.values))
 
 
 def test_the_file_follows_the_cf_geometry_rules(floes):
@@ -117,11 +126,16 @@ def test_the_file_follows_the_cf_geometry_rules(floes):
         assert "interior_ring" not in container.attrs
         x, y = container.attrs["node_coordinates"].split()
         assert (ds[x].attrs["axis"], ds[y].attrs["axis"]) == ("X", "Y")
-        assert ds[x].dims == ds[y].dims == ("vertex",)
+        assert ds[x].dims == ds[y].dims == ("outline_node",)
         assert ds[x].attrs["units"] == ds[y].attrs["units"] == "m"
         node_count = ds[container.attrs["node_count"]]
         assert node_count.dims == ("body",)
-        assert int(node_count.sum()) == ds.sizes["vertex"]
+        assert int(node_count.sum()) == ds.sizes["outline_node"]
+        # The nodes of each geometry in turn, each ring's first node again at its end.
+        ends = np.cumsum(node_count.values)
+        for axis in (x, y):
+            v = ds[axis].values
+            np.testing.assert_array_equal(v[ends - node_count.values], v[ends - 1])
         for name in PER_BODY:
             assert ds[name].attrs["geometry"] == "floe_outline", name
             assert ds[name].dims == ("body",), name
@@ -139,6 +153,7 @@ def as_format_2_0(path: Path, old: Path) -> None:
     with h5py.File(old, "r+") as f:
         for name in NEW:
             del f["bodies"][name]
+        del f["outline_node"]
         for name in PER_BODY:
             del f["bodies"][name].attrs["geometry"]
         f.attrs["format_version"] = "2.0"
@@ -163,3 +178,33 @@ def test_a_format_2_0_file_is_still_read_by_every_reader(floes, tmp_path):
     assert names == sorted(p.name for p in b.parent.iterdir()) and len(names) == 4
     for name in names:
         assert (a.parent / name).read_bytes() == (b.parent / name).read_bytes(), name
+
+
+@pytest.mark.skipif(shutil.which("ogr2ogr") is None, reason="GDAL's ogr2ogr is not installed")
+def test_gdal_reads_the_floes_as_valid_polygons_with_their_fields(floes, tmp_path):
+    """GDAL's netCDF driver (what QGIS opens netCDF with) turns the geometry into a layer of
+    polygons, the variables that name the container into its fields. GDAL closes no ring
+    itself: a ring left open came out open, an invalid polygon."""
+    scene, path = floes
+    flat = tmp_path / "bodies.nc"
+    with xr.open_dataset(path, group="bodies") as ds:
+        ds.attrs["Conventions"] = "CF-1.8"  # the root's: GDAL reads CF geometry by it
+        ds.to_netcdf(flat)
+    out = tmp_path / "floes.geojson"
+    subprocess.run(["ogr2ogr", "-f", "GeoJSON", str(out), str(flat)], check=True, timeout=60)
+    layer = json.loads(out.read_text())
+    assert layer["name"] == "floe_outline"
+    features = layer["features"]
+    assert len(features) == scene.n_bodies
+    for body, feature in zip(scene.bodies, features):
+        assert feature["properties"]["names"] == body.name
+        assert feature["properties"]["kinds"] == body.kind
+        got = shapely.geometry.shape(feature["geometry"])
+        assert isinstance(got, shapely.Polygon) and got.is_valid, body.name
+        ring = feature["geometry"]["coordinates"][0]
+        assert ring[0] == ring[-1] and len(ring) == len(body.vertices) + 1, body.name
+        want = scene_polygon(body)
+        np.testing.assert_allclose(got.exterior.coords, want.exterior.coords, atol=ATOL)
+    # GeoJSON holds 15 significant digits.
+    masses = [f["properties"]["mass"] for f in features]
+    np.testing.assert_allclose(masses, scene.masses, rtol=1e-14)

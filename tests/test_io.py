@@ -117,6 +117,7 @@ def test_run_file_has_the_design_layout(finished, run_opts):
             "xy",
             "vertex",
             "body_edge",
+            "outline_node",
         }
         attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
         assert attrs["taichi_ice_version"] == __version__

@@ -14,7 +14,7 @@ Layout (one file per world; DESIGN.md section 3):
   ``steps``, ``wall_time`` (s), ``resumed`` (how many times the run was resumed).
 - root coordinates (netCDF dimensions, shared by the groups): ``body`` (N,), ``probe``
   (P,: the body index of each probe), ``xy`` (2,: "x", "y"), ``vertex`` (V,), ``body_edge``
-  (N + 1,).
+  (N + 1,), ``outline_node`` (V + N,: format 2.1 on).
 - ``/series/``: ``time`` (T,), ``probe_force`` (T, P, 2) mean contact force on each probe
   body over the sample interval (N), ``friction_energy``, ``viscous_energy``,
   ``drag_energy``, ``kinetic_energy``, ``elastic_energy``, ``crushing_energy``,
@@ -26,9 +26,10 @@ Layout (one file per world; DESIGN.md section 3):
   and the floes as CF-1.8 polygon geometries (CF section 7.5, "Geometries"; format 2.1 on):
   the container ``floe_outline`` (scalar: ``geometry_type = "polygon"``, ``node_count``,
   ``node_coordinates``), ``floe_outline_node_count`` (N,) and the nodes ``floe_outline_x``,
-  ``floe_outline_y`` (V,: ``axis`` X and Y, m): every outline in the world as the scene
+  ``floe_outline_y`` (V + N,: ``axis`` X and Y, m): every outline in the world as the scene
   places it at time 0 (``vertices`` turned by the scene's angle and moved to its position),
-  anticlockwise (CF's right-hand rule for exterior rings), its first node not repeated.
+  anticlockwise (CF's right-hand rule for exterior rings), its first node again at its end
+  (CF allows it; GDAL reads a ring left open as an open, invalid polygon).
   ``names``, ``kinds``, ``mass`` and ``inertia`` carry ``geometry = "floe_outline"``. Convex
   floes are single polygons without holes: no ``part_node_count`` or ``interior_ring``.
 
@@ -100,6 +101,7 @@ VARIABLES: dict[str, dict[str, tuple[str, str]]] = {
         "xy": ("", "vector component"),
         "vertex": ("1", "vertex index in /bodies/vertices"),
         "body_edge": ("1", "index into /bodies/vertex_offsets"),
+        "outline_node": ("1", "node index in /bodies/floe_outline_x and floe_outline_y"),
     },
     "series": {
         "time": ("s", "time of the sample"),
@@ -138,7 +140,7 @@ _GEOMETRY_ATTRS = {
     "comment": (
         "every floe's outline in the world as the scene places it at time 0 (/bodies/vertices "
         "turned by the body's initial angle and moved to its initial centroid), anticlockwise, "
-        "the first node not repeated; a frame's outlines are vertices turned by "
+        "the first node repeated at the end; a frame's outlines are vertices turned by "
         "/frames/angle and moved to /frames/position"
     ),
 }
@@ -162,8 +164,8 @@ DIMS: dict[str, dict[str, tuple[str, ...]]] = {
         "probe_index": ("probe",),
         "floe_outline": (),
         "floe_outline_node_count": ("body",),
-        "floe_outline_x": ("vertex",),
-        "floe_outline_y": ("vertex",),
+        "floe_outline_x": ("outline_node",),
+        "floe_outline_y": ("outline_node",),
     },
 }
 # Attributes every run file has from its start (so a reader always finds them).
@@ -308,6 +310,7 @@ class RunWriter:
             "xy": np.array(["x", "y"], dtype=h5py.string_dtype()),
             "vertex": np.arange(len(scene.vertices_flat), dtype=np.int64),
             "body_edge": np.arange(n + 1, dtype=np.int64),
+            "outline_node": np.arange(len(scene.vertices_flat) + n, dtype=np.int64),
         }
         for name, values in scales.items():
             ds = f.create_dataset(name, data=values)
@@ -455,7 +458,11 @@ def _geometry(b: h5py.Group, scene) -> None:
     nodes = floe_polygons(vertices, offsets, scene.positions, scene.angles)
     b[GEOMETRY] = np.int32(0)  # a container of attributes; its value means nothing
     b[GEOMETRY].attrs.update(_GEOMETRY_ATTRS)
-    b["floe_outline_node_count"] = np.diff(offsets)
+    # Each ring closed: its first node again after its last (CF allows the two to coincide;
+    # GDAL's reader closes no ring itself).
+    closed = np.insert(np.arange(len(nodes)), offsets[1:], offsets[:-1])
+    nodes = nodes[closed]
+    b["floe_outline_node_count"] = np.diff(offsets) + 1
     for axis, name in enumerate(("floe_outline_x", "floe_outline_y")):
         b[name] = nodes[:, axis]
         b[name].attrs["axis"] = "XY"[axis]

@@ -1,8 +1,11 @@
 """Figures of a run file: probe force, energy budget, bird's-eye snapshots, animation.
 
-Matplotlib is imported inside the functions (Agg backend), never at module level; the
-other figures of the package (``paper``, ``study``) draw through :func:`pyplot` and
-:func:`save_figure` here.
+Every figure of the package is a bare ``matplotlib.figure.Figure`` (:func:`new_figure`,
+:func:`subplots`) written by ``Figure.savefig`` (:func:`save_figure`): neither ``pyplot`` nor
+``matplotlib.use`` is touched, so drawing a figure leaves the caller's backend (a notebook's
+inline figures, a GUI) and pyplot's figures as they were. Matplotlib is imported inside the
+functions, never at module level; the other figures of the package (``paper``, ``study``,
+``validate``, ``bench``) are drawn through :func:`subplots` and :func:`save_figure` here.
 """
 
 from __future__ import annotations
@@ -19,17 +22,26 @@ KIND_COLOURS = {
     BodyKind.FIXED.label: "#7f7f7f",
     BodyKind.KINEMATIC.label: "#fdae6b",
 }
+# What ``subplots`` hands to the Figure itself; every other keyword goes to Figure.subplots.
+_FIGURE_KEYWORDS = ("figsize", "dpi", "layout", "facecolor")
 
 
-def pyplot():
-    """``matplotlib.pyplot`` on the Agg backend (files only, no window); every figure of the
-    package is drawn through it."""
-    import matplotlib
+def new_figure(**kwargs):
+    """A ``matplotlib.figure.Figure(**kwargs)``, attached to no backend and unknown to pyplot:
+    ``save_figure`` (or ``fig.savefig``) writes it and the garbage collector frees it."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    return Figure(**kwargs)
 
-    return plt
+
+def subplots(nrows: int = 1, ncols: int = 1, **kwargs):
+    """``(fig, axes)`` as ``pyplot.subplots`` returns them, on a :func:`new_figure`.
+
+    ``figsize``, ``dpi``, ``layout`` and ``facecolor`` go to the Figure; the rest (``squeeze``,
+    ``sharey``, ``gridspec_kw`` ...) to ``Figure.subplots``.
+    """
+    fig = new_figure(**{k: kwargs.pop(k) for k in _FIGURE_KEYWORDS if k in kwargs})
+    return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
 def outlines(run: dict, frame: int) -> list[np.ndarray]:
@@ -75,7 +87,6 @@ def plot_run(
     """
     from .budget import DISSIPATED, HELD, residual
 
-    plt = pyplot()
     path = Path(path)
     out = Path(out_dir) if out_dir else path.parent
     run = read_run(path)
@@ -92,7 +103,7 @@ def plot_run(
     written = []
     title = f"{path.stem}: {run['attrs'].get('friction', '')}, status {run['attrs']['status']}"
 
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig, ax = subplots(figsize=(7, 3.5))
     probes = run["bodies"]["probe_index"]
     for k, idx in enumerate(probes):
         ax.plot(t, np.linalg.norm(s["probe_force"][:, k], axis=-1) / 1e3, lw=0.8, label=names[idx])
@@ -103,7 +114,7 @@ def plot_run(
         ax.legend(fontsize=8)
     written.append(save_figure(fig, out / f"{path.stem}_probe_force.png"))
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = subplots(figsize=(7, 4))
     for name in ("work_in", *HELD, *DISSIPATED):
         if name in s and (name != "crushing_energy" or np.any(s[name])):  # crushing: if any
             ax.plot(t, s[name], label=name.replace("_", " "))
@@ -116,7 +127,7 @@ def plot_run(
 
     n_frames = len(run["frames"]["time"])
     picks = np.unique(np.linspace(0, n_frames - 1, min(snapshots, n_frames)).round().astype(int))
-    fig, axes = plt.subplots(1, len(picks), figsize=(2.4 * len(picks), 4), squeeze=False)
+    fig, axes = subplots(1, len(picks), figsize=(2.4 * len(picks), 4), squeeze=False)
     for ax, f in zip(axes[0], picks):
         draw_bodies(ax, run, f)
         ax.set_title(f"t = {run['frames']['time'][f]:.1f} s", fontsize=9)
@@ -131,7 +142,6 @@ def plot_run(
 
 def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
     """GIF of the bodies beside the probe force, one image per frame."""
-    plt = pyplot()
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     s, fr = run["series"], run["frames"]
@@ -140,7 +150,7 @@ def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
         if s["probe_force"].size
         else np.zeros_like(s["time"])
     )
-    fig, (ax_b, ax_f) = plt.subplots(1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]})
+    fig, (ax_b, ax_f) = subplots(1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]})
 
     def draw(f):
         ax_b.clear()
@@ -155,7 +165,6 @@ def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
 
     anim = FuncAnimation(fig, draw, frames=len(fr["time"]))
     anim.save(path, writer=PillowWriter(fps=fps))
-    plt.close(fig)
     return path
 
 
@@ -167,14 +176,13 @@ def plot_spread(results: dict, path: Path, single: bool = False, titles=None, co
         single: world 0 of each result is the reference run: starred, not in the box.
         titles, colours: per label (default the label, matplotlib's cycle).
     """
-    plt = pyplot()
     titles, colours = titles or {}, colours or {}
     panels = (
         ("peak_force", "peak force on probe (kN)", 1e-3, True),
         ("friction_energy", "total frictional energy (J)", 1.0, True),
         ("concentration", "largest share of frictional\nenergy lost in any 1 s", 1.0, False),
     )
-    fig, axes = plt.subplots(1, len(panels), figsize=(12, 4))
+    fig, axes = subplots(1, len(panels), figsize=(12, 4))
     labels = list(results)
     first = 1 if single else 0
     rng = np.random.default_rng(0)  # horizontal scatter of the dots, for legibility only
@@ -213,10 +221,9 @@ def plot_spread(results: dict, path: Path, single: bool = False, titles=None, co
 
 
 def save_figure(fig, path: Path) -> Path:
-    """Lay ``fig`` out, write it to ``path`` (PNG at 120 dpi), close it; return ``path``."""
-    fig.tight_layout()
+    """Lay ``fig`` out (``tight_layout``, unless it has a layout of its own), write it to
+    ``path`` (PNG at 120 dpi); return ``path``. A bare Figure needs no closing."""
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     fig.savefig(path, dpi=120)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
     return path

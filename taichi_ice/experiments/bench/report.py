@@ -105,12 +105,9 @@ def print_table(rows: list[dict]) -> None:
 
 def plot(rows: list[dict], meta: dict, path: Path) -> None:
     """Throughput, simulated time per wall second, contacts and memory against size."""
-    import matplotlib
+    from ...run.plots import subplots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(11, 8))
+    fig, axes = subplots(2, 2, figsize=(11, 8))
     (ax_steps, ax_sim), (ax_contacts, ax_memory) = axes
     precisions = list(dict.fromkeys(r["precision"] for r in rows))
     for k, precision in enumerate(precisions):
@@ -182,4 +179,3 @@ def plot(rows: list[dict], meta: dict, path: Path) -> None:
     )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

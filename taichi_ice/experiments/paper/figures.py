@@ -21,10 +21,9 @@ SNAPSHOT_EVERY = 4.0  # s between the bird's-eye views of Figure 4, as in the pa
 
 def plot_positions(files: dict[str, Path], path: Path, every: float = SNAPSHOT_EVERY) -> Path:
     """Figure 4: bird's-eye views every ``every`` seconds, one row per model."""
-    from ...run.plots import draw_bodies, outlines, pyplot, save_figure
+    from ...run.plots import draw_bodies, outlines, save_figure, subplots
     from ...run.runfile_read import read_run
 
-    plt = pyplot()
     runs = {label: read_run(p) for label, p in files.items()}
     first = next(iter(runs.values()))
     t_end = min(r["frames"]["time"][-1] for r in runs.values())
@@ -46,7 +45,7 @@ def plot_positions(files: dict[str, Path], path: Path, every: float = SNAPSHOT_E
             bottom = min(bottom, min(p[:, 1].min() for p in moving))
     top = min(top + 0.5, max(p[:, 1].max() for p in fixed))
     view = (left, right, bottom - 0.2, top)
-    fig, axes = plt.subplots(
+    fig, axes = subplots(
         len(runs),
         len(times),
         figsize=(
@@ -74,10 +73,9 @@ def plot_positions(files: dict[str, Path], path: Path, every: float = SNAPSHOT_E
 
 def plot_pillar_force(results: dict[str, EnsembleResult], path: Path) -> Path:
     """Figure 5: magnitude of the force on the pillar against time, one panel per model."""
-    from ...run.plots import pyplot, save_figure
+    from ...run.plots import save_figure, subplots
 
-    plt = pyplot()
-    fig, axes = plt.subplots(2, 2, figsize=(9, 5.5), squeeze=False)
+    fig, axes = subplots(2, 2, figsize=(9, 5.5), squeeze=False)
     for ax, (label, ens) in zip(axes.flat, results.items()):
         s = ens.series[0]
         ax.plot(s["time"], probe_force_magnitude(s) / 1e3, lw=0.7, color=MODEL_COLOURS.get(label))
@@ -95,10 +93,9 @@ def plot_friction_energy(results: dict[str, EnsembleResult], path: Path) -> Path
 
     The single runs are the thick lines; the other layouts are the thin ones.
     """
-    from ...run.plots import pyplot, save_figure
+    from ...run.plots import save_figure, subplots
 
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, ax = subplots(figsize=(7, 4.2))
     for label, ens in results.items():
         colour = MODEL_COLOURS.get(label)
         paper_model = label in PAPER_FINDINGS
@@ -128,10 +125,9 @@ def plot_friction_energy(results: dict[str, EnsembleResult], path: Path) -> Path
 def plot_energy_budget(results: dict[str, EnsembleResult], path: Path) -> Path:
     """Every term of each single run's energy budget, with the residual on its own axis."""
     from ...run.budget import DISSIPATED, HELD, residual
-    from ...run.plots import pyplot, save_figure
+    from ...run.plots import save_figure, subplots
 
-    plt = pyplot()
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), squeeze=False)
+    fig, axes = subplots(2, 2, figsize=(10, 6.5), squeeze=False)
     # What came in first, then where it went.
     terms = ("work_in", *DISSIPATED, *HELD)
     for ax, (label, ens) in zip(axes.flat, results.items()):

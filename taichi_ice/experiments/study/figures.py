@@ -21,13 +21,12 @@ def _arms(s: dict, kinds=("stratum", "control")) -> list[dict]:
 def plot_phase_map(s: dict, path: Path) -> Path:
     """P(jam) per model (rows) and stratum (columns, the control included), at the three
     thresholds side by side, with the counts and exact intervals written in."""
-    from ...run.plots import pyplot, save_figure
+    from ...run.plots import save_figure, subplots
 
-    plt = pyplot()
     arms = sorted(_arms(s), key=lambda d: d["area_fraction"])
     models = s["models"]
     names = (("jam_5kN", "5 kN"), ("jam", "10 kN"), ("jam_20kN", "20 kN"))
-    fig, axes = plt.subplots(1, 3, figsize=(13, 5), sharey=True)
+    fig, axes = subplots(1, 3, figsize=(13, 5), sharey=True)
     for ax, (name, said) in zip(axes, names):
         p = np.array([[s["described"][d["arm"]][m][name]["value"] for d in arms] for m in models])
         im = ax.imshow(p, vmin=0, vmax=1, cmap="viridis", aspect="auto")
@@ -54,11 +53,10 @@ def plot_phase_map(s: dict, path: Path) -> Path:
 def plot_release(s: dict, path: Path) -> Path:
     """Kaplan-Meier curves of the time from the peak to the largest jam's release, per model,
     one panel per jamming stratum (no strength); ticks mark censored runs' ends."""
-    from ...run.plots import pyplot, save_figure
+    from ...run.plots import save_figure, subplots
 
-    plt = pyplot()
     arms = _arms(s, ("stratum",))
-    fig, axes = plt.subplots(1, len(arms), figsize=(6 * len(arms), 4.2), sharey=True, squeeze=False)
+    fig, axes = subplots(1, len(arms), figsize=(6 * len(arms), 4.2), sharey=True, squeeze=False)
     for ax, d in zip(axes[0], arms):
         for m in s["models"]:
             e = s["described"][d["arm"]][m]["release"]
@@ -87,9 +85,8 @@ def plot_release(s: dict, path: Path) -> Path:
 def plot_distributions(s: dict, path: Path) -> Path:
     """Every layout's peak force, frictional energy, share of time jammed and energy
     concentration per model, one row per stratum (the control included)."""
-    from ...run.plots import pyplot, save_figure
+    from ...run.plots import save_figure, subplots
 
-    plt = pyplot()
     arms = sorted(_arms(s), key=lambda d: -d["area_fraction"])
     measures = (
         ("peak_force", "peak pillar force (N)", True),
@@ -97,7 +94,7 @@ def plot_distributions(s: dict, path: Path) -> Path:
         ("jammed_fraction", "share of time above 10 kN", False),
         ("concentration", "largest 1-s share of the frictional energy", False),
     )
-    fig, axes = plt.subplots(len(arms), 4, figsize=(16, 3.4 * len(arms)), squeeze=False)
+    fig, axes = subplots(len(arms), 4, figsize=(16, 3.4 * len(arms)), squeeze=False)
     rng = np.random.default_rng(0)
     for row, d in zip(axes, arms):
         worlds = [w for w in s["per_world"] if w["arm"] == d["arm"]]
@@ -120,12 +117,11 @@ def plot_distributions(s: dict, path: Path) -> Path:
 def plot_step_bias(s: dict, path: Path) -> Path:
     """Each layout's measure at half the step against at the default step (the line: no
     shift), per measure, every model."""
-    from ...run.plots import pyplot, save_figure
+    from ...run.plots import save_figure, subplots
 
-    plt = pyplot()
     step = s["step_bias"][0]
     names = ("peak_force", "friction_energy", "jammed_fraction", "concentration")
-    fig, axes = plt.subplots(1, 4, figsize=(16, 4))
+    fig, axes = subplots(1, 4, figsize=(16, 4))
     by = {}
     for w in s["per_world"]:
         if w["arm"] in (step["arm"], step["against"]):

@@ -264,12 +264,9 @@ def plot(summary: dict, path: Path) -> None:
     """Four panels: the slider's work error against dt, the pillar's frictional-energy error
     against dt, steady sliding against mu_ss, and the sensitivity to the tangential stiffness
     and to the steady-state law's t_c."""
-    import matplotlib
+    from ...run.plots import subplots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(12, 9))
+    fig, axes = subplots(2, 2, figsize=(12, 9))
     ax = axes[0, 0]
     for name, s in summary["slider"].items():
         runs = [r for r in s["runs"] if r["work_error_rel"] > 0]
@@ -337,4 +334,3 @@ def plot(summary: dict, path: Path) -> None:
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

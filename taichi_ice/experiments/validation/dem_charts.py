@@ -36,22 +36,14 @@ STYLES = {"f64": "-", "f32": "--"}
 UNITS = {"positions": "largest block displacement (m)"}
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
-    plt = _plt()
     from matplotlib.lines import Line2D
     from matplotlib.ticker import NullFormatter
 
+    from ...run.plots import subplots
+
     panels = [(s, m) for s, ms in MEASURES.items() for m in ms]
-    fig, axes = plt.subplots(3, 3, figsize=(14, 11.5), constrained_layout=True)
+    fig, axes = subplots(3, 3, figsize=(14, 11.5), layout="constrained")
     points = summary["points"]
     for ax, (scene, measure) in zip(axes.flat, panels):
         mine = [p for p in points if p["scene"] == scene and p["measure"] == measure]
@@ -138,12 +130,12 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
         fontsize=11,
     )
     fig.savefig(path, dpi=75)
-    plt.close(fig)
 
 
 def plot_stability(summary: dict[str, Any], path: Path) -> None:
-    plt = _plt()
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 4.8), constrained_layout=True)
+    from ...run.plots import subplots
+
+    fig, (ax, ax2) = subplots(1, 2, figsize=(13, 4.8), layout="constrained")
     for name, c in summary.get("chaos", {}).items():
         gap = np.maximum(np.asarray(c["largest_gap_m"]), 1e-17)
         ax.semilogy(
@@ -216,7 +208,6 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
     ax2.set_xlabel("dt / stable_dt (o, s survived: Euler, analytic; x diverged)")
     ax2.set_title("(b) the largest step each scene survives")
     fig.savefig(path, dpi=80)
-    plt.close(fig)
 
 
 def _stability_rows(summary: dict[str, Any]) -> list[tuple[str, str, dict[str, Any]]]:

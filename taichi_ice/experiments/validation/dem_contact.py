@@ -448,12 +448,9 @@ def plot(
 ) -> None:
     """Four panels in the style of ``single_interface.plot_figure3``: the DEM's F_t / F_n
     solid, the exact solution as circles, the floor speed dashed (right axis)."""
-    import matplotlib
+    from ...run.plots import subplots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), constrained_layout=True)
+    fig, axes = subplots(2, 2, figsize=(10, 6.4), layout="constrained")
     for ax, (name, (t, v, mu, mu_exact)) in zip(axes.flat, curves.items()):
         profile = profile_set[name]
         shown = t <= profile.shown + 1e-9
@@ -482,7 +479,6 @@ def plot(
         "(rate and state, Lishman et al. 2013)"
     )
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 __all__ = [

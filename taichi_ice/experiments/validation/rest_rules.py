@@ -71,12 +71,9 @@ def run(out_dir: str | Path, law: RateState | None = None) -> dict[str, Any]:
 
 
 def plot(c: dict[str, np.ndarray], path: Path) -> None:
-    import matplotlib
+    from ...run.plots import subplots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4.2), constrained_layout=True)
+    fig, ax = subplots(figsize=(8, 4.2), layout="constrained")
     styles = {
         "paper": ("C0", "-", 2.2),
         "healing": ("C1", "-", 1.4),
@@ -93,7 +90,6 @@ def plot(c: dict[str, np.ndarray], path: Path) -> None:
     ax.set_title("Slide at 1 mm/s, stop for 5 s, slide again")
     ax.legend(fontsize=8, loc="lower right")
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 __all__ = ["curves", "history", "run"]

@@ -266,12 +266,9 @@ def plot_figure3(
     path: Path,
 ) -> None:
     """Four panels as in the paper: slip rate dashed (right axis), friction solid (left)."""
-    import matplotlib
+    from ...run.plots import subplots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), constrained_layout=True)
+    fig, axes = subplots(2, 2, figsize=(10, 6.4), layout="constrained")
     for ax, (name, (t, v, mu, mu_exact)) in zip(axes.flat, curves.items()):
         profile = profile_set[name]
         shown = t <= profile.shown + 1e-9
@@ -296,7 +293,6 @@ def plot_figure3(
         "slip rate dashed, friction solid"
     )
     fig.savefig(path, dpi=90)
-    plt.close(fig)
 
 
 def speed_axis(ax, t, v, label: str, legend: bool = False) -> None:

@@ -288,17 +288,15 @@ def run(
 
 def plot_speed_accuracy(runs: list[dict[str, Any]], path: Path) -> None:
     """2 x 2: error against dt / t_c (top) and against wall time (bottom), ramp and sinusoid."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
+
+    from ...run.plots import subplots
 
     colors = {"exponential": "C0", "euler": "C3", "implicit": "C2", "rk4": "C1"}
     styles = {"f64": "-", "f32": "--"}
     markers = {"taichi": "o", "numpy": "x"}
     t_c = RateState().t_c
-    fig, axes = plt.subplots(2, 2, figsize=(11, 8.2), constrained_layout=True)
+    fig, axes = subplots(2, 2, figsize=(11, 8.2), layout="constrained")
     titles = {
         "ramp": "ramp, knots on the grid",
         "sinusoid": "fast sinusoid, sampled",
@@ -343,4 +341,3 @@ def plot_speed_accuracy(runs: list[dict[str, Any]], path: Path) -> None:
     axes[0, 0].legend(handles=handles, fontsize=8, loc="lower right", ncol=2)
     fig.suptitle("Rate-and-state integrators: accuracy against step and against cost")
     fig.savefig(path, dpi=80)
-    plt.close(fig)

@@ -134,13 +134,10 @@ def run(
 
 def plot_stability(curves: list[tuple[str, float, np.ndarray, np.ndarray]], path: Path) -> None:
     """Left: |theta - exact| over time; right: |R(h)| of each method with the limits."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ...run.plots import subplots
 
     colors = {"exponential": "C0", "euler": "C3", "implicit": "C2", "rk4": "C1"}
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.3), constrained_layout=True)
+    fig, (ax, ax2) = subplots(1, 2, figsize=(11, 4.3), layout="constrained")
     floor = 1e-17
     for method, h, t_over_tc, deviation in curves:
         unstable = abs(float(amplification(method, h))) > 1.0
@@ -172,4 +169,3 @@ def plot_stability(curves: list[tuple[str, float, np.ndarray, np.ndarray]], path
     ax2.set_title("(b) |R(h)|: above 1 the method diverges")
     ax2.legend(fontsize=8)
     fig.savefig(path, dpi=90)
-    plt.close(fig)

@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from taichi_ice.run.budget import SERIES
+from taichi_ice.run.plots import animation_frames, positions_figure
 from taichi_ice.run.runfile import RunWriter
+from taichi_ice.run.runfile_read import read_run
 from taichi_ice.scene.parse import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,6 +40,49 @@ def write_drift(path: Path) -> Path:
         writer.add_sample(0.1 * k, np.zeros((1, 2)), np.zeros(len(SERIES)), 0)
     writer.close("complete", steps=len(DRIFT_X))
     return path
+
+
+def assert_one_view_holding(axes, xs) -> None:
+    """Every axes has the same limits, and they hold both squares with the left one's centre
+    at each of ``xs`` (their extents from the scene's geometry)."""
+    views = {(ax.get_xlim(), ax.get_ylim()) for ax in axes}
+    assert len(views) == 1, views
+    (x0, x1), (y0, y1) = views.pop()
+    assert x0 <= STILL_X - HALF and x1 >= max(xs) + HALF
+    assert x0 <= min(xs) - HALF
+    assert y0 <= -HALF and y1 >= HALF
+    # One view, not a window far larger than the scene: within 10 % of its extent.
+    assert x1 - x0 <= 1.1 * (max(xs) + HALF - (STILL_X - HALF))
+
+
+def test_every_snapshot_panel_shares_one_view_that_holds_every_frame(tmp_path):
+    """A square that drifts 1.9 m is seen to move: the panels' limits are one, and each
+    panel's bodies lie inside it."""
+    run = read_run(write_drift(tmp_path / "drift.h5"))
+    fig = positions_figure(run, snapshots=4)
+    axes = [ax for ax in fig.axes if ax.collections]
+    assert len(axes) == 4
+    assert_one_view_holding(axes, DRIFT_X)
+    # The square's outline in each panel is where the run put it (drawn, not only framed).
+    for ax in axes:
+        t = float(re.search(r"t = ([0-9.]+) s", ax.get_title()).group(1))
+        x = DRIFT_X[round(t / 0.1)]
+        left = ax.collections[0].get_paths()[0].vertices
+        assert np.isclose(left[:, 0].min(), x - HALF) and np.isclose(left[:, 0].max(), x + HALF)
+
+
+def test_every_frame_of_the_animation_shares_one_view(tmp_path):
+    """The GIF's bodies panel keeps one view from the first frame to the last."""
+    run = read_run(write_drift(tmp_path / "drift.h5"))
+    fig, draw, n_frames = animation_frames(run)
+    assert n_frames == len(DRIFT_X)
+    limits = []
+    for f in range(n_frames):
+        draw(f)
+        ax = fig.axes[0]
+        limits.append((ax.get_xlim(), ax.get_ylim()))
+        assert_one_view_holding([ax], DRIFT_X)
+    assert len(set(limits)) == 1
 
 
 # Draws a run's figures and its GIF in a fresh interpreter whose backend is set to one that
@@ -90,3 +135,33 @@ def test_no_module_of_the_package_switches_the_backend_or_imports_pyplot():
         ):
             offenders.append(str(path.relative_to(ROOT)))
     assert offenders == []
+
+
+def test_outlines_turn_each_body_about_its_centre():
+    """A 1 m square turned by 30 degrees about (2, 1), beside a triangle: each corner is the
+    body's own corner turned anticlockwise by the angle and moved to its centre; the view
+    holds both with the margin."""
+    from taichi_ice.run.plots import VIEW_MARGIN, outlines, shared_view
+
+    square = np.array([[-HALF, -HALF], [HALF, -HALF], [HALF, HALF], [-HALF, HALF]])
+    triangle = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    angle = np.radians(30.0)
+    run = {
+        "bodies": {
+            "vertex_offsets": np.array([0, 4, 7]),
+            "vertices": np.vstack([square, triangle]),
+        },
+        "frames": {
+            "position": np.array([[[2.0, 1.0], [-3.0, 0.0]]]),
+            "angle": np.array([[angle, 0.0]]),
+        },
+    }
+    turned, still = outlines(run, 0)
+    c, s = np.cos(angle), np.sin(angle)
+    for (x, y), (tx, ty) in zip(square, turned):
+        assert np.allclose([tx, ty], [2.0 + c * x - s * y, 1.0 + s * x + c * y])
+    assert np.allclose(still, triangle + np.array([-3.0, 0.0]))
+    reach = HALF * (c + s)  # half the extent of the turned square
+    lo_x, hi_x, lo_y, hi_y = -3.0, 2.0 + reach, min(0.0, 1.0 - reach), 1.0 + reach
+    pad = VIEW_MARGIN * max(hi_x - lo_x, hi_y - lo_y)
+    assert np.allclose(shared_view(run, [0]), (lo_x - pad, hi_x + pad, lo_y - pad, hi_y + pad))

@@ -22,6 +22,9 @@ KIND_COLOURS = {
     BodyKind.FIXED.label: "#7f7f7f",
     BodyKind.KINEMATIC.label: "#fdae6b",
 }
+# Room around the bodies in a shared view, as a share of its longer side: an outline on the
+# view's edge keeps its line.
+VIEW_MARGIN = 0.02
 # What ``subplots`` hands to the Figure itself; every other keyword goes to Figure.subplots.
 _FIGURE_KEYWORDS = ("figsize", "dpi", "layout", "facecolor")
 
@@ -44,23 +47,47 @@ def subplots(nrows: int = 1, ncols: int = 1, **kwargs):
     return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
-def outlines(run: dict, frame: int) -> list[np.ndarray]:
-    """World outlines ``(n_i, 2)`` of every body at one frame of a run (from ``read_run``)."""
+def world_vertices(run: dict, frame: int) -> np.ndarray:
+    """Every body's outline at one frame, in world coordinates (m), stacked ``(V, 2)`` in the
+    order of ``bodies/vertices`` (body ``i`` is rows ``vertex_offsets[i]:[i + 1]``)."""
     b, fr = run["bodies"], run["frames"]
     off, verts = b["vertex_offsets"], b["vertices"]
-    pos, ang = fr["position"][frame], fr["angle"][frame]
-    out = []
-    for i in range(len(off) - 1):
-        v = verts[off[i] : off[i + 1]]
-        c, s = np.cos(ang[i]), np.sin(ang[i])
-        out.append(v @ np.array([[c, s], [-s, c]]) + pos[i])
-    return out
+    owner = np.repeat(np.arange(len(off) - 1), np.diff(off))
+    ang = fr["angle"][frame][owner]
+    c, s = np.cos(ang), np.sin(ang)
+    x = c * verts[:, 0] - s * verts[:, 1]
+    y = s * verts[:, 0] + c * verts[:, 1]
+    return np.stack([x, y], axis=-1) + fr["position"][frame][owner]
+
+
+def outlines(run: dict, frame: int) -> list[np.ndarray]:
+    """World outlines ``(n_i, 2)`` of every body at one frame of a run (from ``read_run``)."""
+    return np.split(world_vertices(run, frame), run["bodies"]["vertex_offsets"][1:-1])
+
+
+def shared_view(run: dict, frames) -> tuple[float, float, float, float]:
+    """One view ``(xmin, xmax, ymin, ymax)`` in m for every panel that shows ``frames``.
+
+    The union of every body's outline over those frames, walls and pushers included, plus
+    ``VIEW_MARGIN``: a floe that drifts is seen to move against a frame that stays put, and
+    it stays in view at each frame. The run's bodies are what frames a scene (its walls and
+    channel are fixed bodies in every frame), so no scene-specific box is needed; a view of
+    part of a scene (Figure 4's channel) is passed to :func:`draw_bodies` by its caller.
+    """
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for f in frames:
+        pts = world_vertices(run, f)
+        lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
+    pad = VIEW_MARGIN * max(float(np.max(hi - lo)), 1e-9)
+    return (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad)
 
 
 def draw_bodies(ax, run: dict, frame: int, view: tuple | None = None) -> None:
     """Filled outlines of every body at ``frame`` on ``ax``: walls grey, pushers orange.
 
-    ``view`` is ``(xmin, xmax, ymin, ymax)`` in m; default every body in full.
+    ``view`` is ``(xmin, xmax, ymin, ymax)`` in m; default every body of this frame in full.
+    Panels that show one run at several frames take one view (:func:`shared_view`), or a
+    body that moved looks still.
     """
     from matplotlib.collections import PolyCollection
 
@@ -69,11 +96,25 @@ def draw_bodies(ax, run: dict, frame: int, view: tuple | None = None) -> None:
     colours = [KIND_COLOURS.get(k, "#cccccc") for k in kinds]
     ax.add_collection(PolyCollection(polys, facecolors=colours, edgecolors="k", linewidths=0.4))
     if view is None:
-        pts = np.concatenate(polys)
-        view = (pts[:, 0].min(), pts[:, 0].max(), pts[:, 1].min(), pts[:, 1].max())
+        view = shared_view(run, [frame])
     ax.set_xlim(view[0], view[1])
     ax.set_ylim(view[2], view[3])
     ax.set_aspect("equal")
+
+
+def positions_figure(run: dict, snapshots: int = 6):
+    """Bird's-eye snapshots at ``snapshots`` frames spread over the run, one panel each, all
+    on one view (:func:`shared_view` of the frames shown); returns the Figure."""
+    n_frames = len(run["frames"]["time"])
+    picks = np.unique(np.linspace(0, n_frames - 1, min(snapshots, n_frames)).round().astype(int))
+    view = shared_view(run, picks)
+    fig, axes = subplots(1, len(picks), figsize=(2.4 * len(picks), 4), squeeze=False)
+    for ax, f in zip(axes[0], picks):
+        draw_bodies(ax, run, f, view=view)
+        ax.set_title(f"t = {run['frames']['time'][f]:.1f} s", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    return fig
 
 
 def plot_run(
@@ -83,7 +124,8 @@ def plot_run(
 
     Figures: ``<stem>_probe_force.png`` (force magnitude on each probe body against time),
     ``<stem>_energy.png`` (every budget term and the residual), ``<stem>_positions.png``
-    (bird's-eye snapshots), and with ``animate`` ``<stem>.gif`` (blocks beside the probe force).
+    (bird's-eye snapshots on one view), and with ``animate`` ``<stem>.gif`` (blocks beside
+    the probe force, every frame on one view).
     """
     from .budget import DISSIPATED, HELD, residual
 
@@ -125,37 +167,35 @@ def plot_run(
     ax.legend(fontsize=8, ncol=2)
     written.append(save_figure(fig, out / f"{path.stem}_energy.png"))
 
-    n_frames = len(run["frames"]["time"])
-    picks = np.unique(np.linspace(0, n_frames - 1, min(snapshots, n_frames)).round().astype(int))
-    fig, axes = subplots(1, len(picks), figsize=(2.4 * len(picks), 4), squeeze=False)
-    for ax, f in zip(axes[0], picks):
-        draw_bodies(ax, run, f)
-        ax.set_title(f"t = {run['frames']['time'][f]:.1f} s", fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    written.append(save_figure(fig, out / f"{path.stem}_positions.png"))
+    written.append(
+        save_figure(positions_figure(run, snapshots), out / f"{path.stem}_positions.png")
+    )
 
     if animate:
         written.append(animate_run(run, out / f"{path.stem}.gif"))
     return written
 
 
-def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
-    """GIF of the bodies beside the probe force, one image per frame."""
-    from matplotlib.animation import FuncAnimation, PillowWriter
-
+def animation_frames(run: dict):
+    """The animation's Figure and ``draw(f)``, which draws frame ``f`` on it: the bodies on
+    one view for every frame (:func:`shared_view` of them all) beside the summed probe force,
+    drawn up to the frame's time. Returns ``(fig, draw, n_frames)``."""
     s, fr = run["series"], run["frames"]
     force = (
         np.linalg.norm(s["probe_force"], axis=-1).sum(axis=-1) / 1e3
         if s["probe_force"].size
         else np.zeros_like(s["time"])
     )
+    n_frames = len(fr["time"])
+    view = shared_view(run, range(n_frames))
     fig, (ax_b, ax_f) = subplots(1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]})
 
     def draw(f):
         ax_b.clear()
-        draw_bodies(ax_b, run, f)
+        draw_bodies(ax_b, run, f, view=view)
         ax_b.set_title(f"t = {fr['time'][f]:.1f} s", fontsize=9)
+        ax_b.set_xlabel("x (m)")
+        ax_b.set_ylabel("y (m)")
         ax_f.clear()
         ax_f.plot(s["time"], force, lw=0.6, color="0.6")
         now = s["time"] <= fr["time"][f]
@@ -163,7 +203,15 @@ def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
         ax_f.set_xlabel("time (s)")
         ax_f.set_ylabel("probe force (kN)")
 
-    anim = FuncAnimation(fig, draw, frames=len(fr["time"]))
+    return fig, draw, n_frames
+
+
+def animate_run(run: dict, path: Path, fps: int = 10) -> Path:
+    """GIF of the bodies beside the probe force, one image per frame (``animation_frames``)."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    fig, draw, n_frames = animation_frames(run)
+    anim = FuncAnimation(fig, draw, frames=n_frames)
     anim.save(path, writer=PillowWriter(fps=fps))
     return path
 

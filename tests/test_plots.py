@@ -8,12 +8,15 @@ bodies' true extents are known from the scene's geometry: 1 m squares.
 
 import os
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from taichi_ice.commands.cli import main
 from taichi_ice.run.budget import SERIES
 from taichi_ice.run.plots import animation_frames, positions_figure
 from taichi_ice.run.runfile import RunWriter
@@ -95,7 +98,6 @@ before = matplotlib.get_backend()
 def refuse(*args, **kwargs):
     raise AssertionError(f"matplotlib.use{args} called by the package")
 matplotlib.use = refuse
-from taichi_ice.run.budget import SERIES
 from taichi_ice.run.plots import plot_run
 written = plot_run(sys.argv[1], sys.argv[2], animate=True)
 assert matplotlib.get_backend() == before, (before, matplotlib.get_backend())
@@ -165,3 +167,60 @@ def test_outlines_turn_each_body_about_its_centre():
     lo_x, hi_x, lo_y, hi_y = -3.0, 2.0 + reach, min(0.0, 1.0 - reach), 1.0 + reach
     pad = VIEW_MARGIN * max(hi_x - lo_x, hi_y - lo_y)
     assert np.allclose(shared_view(run, [0]), (lo_x - pad, hi_x + pad, lo_y - pad, hi_y + pad))
+
+
+# Starts `taichi-ice run` and kills it (SIGKILL) at the instant of the run file's first write,
+# after the file was made: the file holds the bodies, no sample and no frame, status running.
+KILL_AT_FIRST_WRITE = """
+import os, signal, sys
+from taichi_ice.commands.cli import main
+from taichi_ice.run.runfile import RunWriter
+RunWriter._write = lambda self, *a, **k: os.kill(os.getpid(), signal.SIGKILL)
+main(["run", sys.argv[1], "--out", sys.argv[2], "--quiet"])
+"""
+
+
+def test_plot_of_a_run_killed_before_its_first_sample_is_one_line(tmp_path, capsys):
+    """`taichi-ice plot` of a run killed before it wrote a sample: exit 2, one line that says
+    the run has nothing yet and why, no traceback, no figure folder."""
+    path = tmp_path / "killed.h5"
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+    }
+    proc = subprocess.run(
+        [sys.executable, "-c", KILL_AT_FIRST_WRITE, TWO_SQUARES, str(path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    run = read_run(path)
+    assert run["attrs"]["status"] == "running"
+    assert len(run["series"]["time"]) == 0 and len(run["frames"]["time"]) == 0
+    out = tmp_path / "figs"
+    assert main(["plot", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"taichi-ice: error: {path}: ")
+    assert "no sample or frame yet" in lines[0] and "killed before its first sample" in lines[0]
+    assert f"run it again (taichi-ice run {TWO_SQUARES} --out {path} --overwrite)" in lines[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("status", ["failed", "complete"])
+def test_plot_of_an_empty_run_says_its_status(tmp_path, capsys, status):
+    """A run that failed before its first sample says so, with its reason."""
+    path = tmp_path / "empty.h5"
+    failure = "diverged at t = 0" if status == "failed" else ""
+    RunWriter(path, load_scenario(TWO_SQUARES), {}).close(status, failure=failure)
+    assert main(["plot", str(path)]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "\n" not in line and "no sample or frame yet" in line
+    if status == "failed":
+        assert "failed before its first sample (diverged at t = 0)" in line
+    else:
+        assert "status complete" in line

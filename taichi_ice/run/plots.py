@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..codes import BodyKind
+from ..errors import UsageError
 from .runfile_read import read_run
 
 KIND_COLOURS = {
@@ -102,6 +103,24 @@ def draw_bodies(ax, run: dict, frame: int, view: tuple | None = None) -> None:
     ax.set_aspect("equal")
 
 
+def check_plottable(run: dict, path) -> None:
+    """Raise UsageError (one line) unless the run holds a sample and a frame to draw."""
+    if len(run["series"]["time"]) and len(run["frames"]["time"]):
+        return
+    status = run["attrs"].get("status", "")
+    if status == "failed":
+        why = f"it failed before its first sample ({run['attrs'].get('failure') or 'no reason'})"
+    elif status == "running":
+        why = "it was killed before its first sample, or is still starting"
+    else:
+        why = f"status {status}"
+    scene = run["attrs"].get("source") or "SCENE"
+    raise UsageError(
+        f"{path}: the run has no sample or frame yet ({why}); nothing to plot: wait for its "
+        f"first frame, or run it again (taichi-ice run {scene} --out {path} --overwrite)"
+    )
+
+
 def positions_figure(run: dict, snapshots: int = 6):
     """Bird's-eye snapshots at ``snapshots`` frames spread over the run, one panel each, all
     on one view (:func:`shared_view` of the frames shown); returns the Figure."""
@@ -126,19 +145,16 @@ def plot_run(
     ``<stem>_energy.png`` (every budget term and the residual), ``<stem>_positions.png``
     (bird's-eye snapshots on one view), and with ``animate`` ``<stem>.gif`` (blocks beside
     the probe force, every frame on one view).
+
+    Raises:
+        UsageError: the run holds no sample or frame yet (killed or failed before its first).
     """
     from .budget import DISSIPATED, HELD, residual
 
     path = Path(path)
     out = Path(out_dir) if out_dir else path.parent
     run = read_run(path)
-    if not len(run["series"]["time"]) or not len(run["frames"]["time"]):
-        from ..errors import UsageError
-
-        raise UsageError(
-            f"{path}: the run has no sample or frame yet (status {run['attrs']['status']}); "
-            "nothing to plot"
-        )
+    check_plottable(run, path)
     out.mkdir(parents=True, exist_ok=True)
     s, names = run["series"], run["bodies"]["names"]
     t = s["time"]

@@ -204,7 +204,9 @@ def animation_frames(run: dict):
     )
     n_frames = len(fr["time"])
     view = shared_view(run, range(n_frames))
-    fig, (ax_b, ax_f) = subplots(1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]})
+    fig, (ax_b, ax_f) = subplots(
+        1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]}, layout="constrained"
+    )
 
     def draw(f):
         ax_b.clear()

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import argparse
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import h5py
 import pytest
 
-from taichi_ice.commands.args import parse_friction
-from taichi_ice.commands.cli import main
+from taichi_ice.commands.args import parse_dt, parse_duration, parse_friction, positive_float
+from taichi_ice.commands.cli import build_parser, main
 from taichi_ice.physics.friction import Coulomb, RateState
 
 TWO_SQUARES = "scenarios/two_squares.toml"
@@ -103,3 +106,75 @@ def test_a_launch_the_gpu_driver_refuses_ends_in_one_line_and_a_failed_file(
     assert "refused a kernel launch" in errors[0] and "--arch cpu" in errors[0]
     with h5py.File(out, "r") as f:
         assert f.attrs["status"] == "failed"
+
+
+# Options that take a time (simulated or wall clock), by name; and the value types that read
+# one, so that a new time option is caught whatever its name.
+TIME_OPTIONS = {"--until", "--dt", "--checkpoint-every", "--box2d-dt"}
+TIME_TYPES = (parse_dt, parse_duration, positive_float)
+# A unit of time as the help writes it: "in s", "(s)", "seconds", or a duration like 30s, 1h.
+TIME_UNIT = re.compile(r"(?<![\w'])s\b|\bseconds?\b|\b\d+(?:s|min|h)\b")
+
+
+def commands(parser, name="taichi-ice"):
+    """``(name, parser)`` of the command and of every subcommand under it."""
+    yield name, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub, p in action.choices.items():
+                yield from commands(p, f"{name} {sub}")
+
+
+def test_every_option_of_every_command_has_help_and_a_time_says_its_unit():
+    """`--help` of the command and of each subcommand explains every option and argument
+    (-h aside), and the help of each option that takes a time names its unit."""
+    missing, unitless, timed = [], [], set()
+    found = list(commands(build_parser()))
+    assert {name.split()[-1] for name, _ in found} >= {"run", "plot", "paper", "sweep", "study"}
+    for name, parser in found:
+        parser.format_help()  # every help string formats (a stray % would raise)
+        for action in parser._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            label = f"{name} {'/'.join(action.option_strings) or action.dest}"
+            if not (action.help or "").strip() or action.help == argparse.SUPPRESS:
+                missing.append(label)
+            for choice in getattr(action, "_choices_actions", []):  # the subcommands listed
+                if not (choice.help or "").strip():
+                    missing.append(f"{label} {choice.dest}")
+            if action.type in TIME_TYPES or TIME_OPTIONS & set(action.option_strings):
+                timed.add(label)
+                if not TIME_UNIT.search(action.help or ""):
+                    unitless.append(f"{label}: {action.help!r}")
+    assert missing == []
+    assert unitless == []
+    assert {"taichi-ice run --until", "taichi-ice run --dt", "taichi-ice bench --box2d-dt"} <= timed
+    assert "taichi-ice run --checkpoint-every" in timed
+
+
+def test_run_help_says_a_bundled_scene_works_and_names_each(capsys):
+    """`run --help` says a scene may be a bundled one, and names every scene shipped in
+    the package's scenarios folder."""
+    shipped = sorted(
+        p.stem for p in (Path(__file__).parents[1] / "taichi_ice" / "scenarios").glob("*.toml")
+    )
+    assert "pillar" in shipped
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "--help"])
+    assert exc.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "bundled with taichi-ice" in text
+    for name in shipped:
+        assert name in text, name
+
+
+def test_slots_help_says_what_a_slot_is_and_what_happens_past_it(capsys):
+    """`--slots` is explained as the most contacts a body holds at once, with what a run
+    does when a body needs more."""
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    options = text[text.index("options:") :]  # past the usage line
+    slots = options[options.index("--slots N") : options.index("--integrator {")]
+    assert "most contacts one body can hold at once" in slots
+    assert "stops the run" in slots and "raise it" in slots

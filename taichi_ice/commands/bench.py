@@ -12,6 +12,7 @@ from pathlib import Path
 from ..experiments.bench import DEFAULT_STEPS, QUICK_STEPS, box2d
 from ..experiments.bench.scenes import SCENES
 from .args import nonnegative_int
+from .help_text import ARCH_HELP, PRECISION_HELP
 
 
 def _size(text: str) -> int:
@@ -42,18 +43,28 @@ def add_options(p: argparse.ArgumentParser) -> None:
         type=_size,
         nargs="+",
         default=None,
-        help="numbers of blocks, 1e3 to 1e6 (default 1e3 1e4 1e5)",
+        help="numbers of blocks, 1e3 to 1e6 (default 1e3 1e4 1e5), e.g. --sizes 1e4 1e5",
     )
     p.add_argument(
         "--precision",
         nargs="+",
         choices=("f64", "f32"),
         default=["f64", "f32"],
-        help="one run per size in each (default both)",
+        help=PRECISION_HELP + "; one run per size in each type given (default both)",
     )
-    p.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
-    p.add_argument("--law", default="coulomb", choices=("coulomb", "rate-state"))
-    p.add_argument("--water", action="store_true", help="add water drag")
+    p.add_argument(
+        "--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"], help=ARCH_HELP
+    )
+    p.add_argument(
+        "--law",
+        default="coulomb",
+        choices=("coulomb", "rate-state"),
+        help="friction law of every contact: coulomb (mu = 0.5, the default) or rate-state "
+        "(with its default parameters)",
+    )
+    p.add_argument(
+        "--water", action="store_true", help="add water drag on every block (default: none)"
+    )
     p.add_argument(
         "--energy",
         action="store_true",
@@ -94,7 +105,8 @@ def add_options(p: argparse.ArgumentParser) -> None:
         "--box2d-dt",
         type=float,
         default=box2d.DEFAULT_DT,
-        help=f"Box2D's time step, s (default {box2d.DEFAULT_DT:g})",
+        metavar="SECONDS",
+        help=f"Box2D's time step, in s (default {box2d.DEFAULT_DT:g})",
     )
     p.add_argument(
         "--box2d-substeps",

@@ -27,6 +27,7 @@ from .args import (
     positive_int,
     slots_per_body,
 )
+from .help_text import ARCH_HELP, PRECISION_HELP, SLOTS_HELP, scene_help
 
 EXAMPLES = {
     "run": """examples:
@@ -232,15 +233,19 @@ def _engine_options(p: argparse.ArgumentParser) -> None:
         "--arch",
         default=None,
         choices=["cpu", "gpu", "cuda", "vulkan", "metal"],
-        help="where the kernels run (default cpu; gpu: what Taichi finds)",
+        help=ARCH_HELP,
     )
     p.add_argument(
-        "--precision", default=None, choices=["f64", "f32"], help="float type (default f64)"
+        "--precision", default=None, choices=["f64", "f32"], help=PRECISION_HELP + "; default f64"
     )
     p.add_argument(
-        "--until", type=positive_float, default=None, help="end time, s (default: duration)"
+        "--until",
+        type=positive_float,
+        default=None,
+        metavar="SECONDS",
+        help="simulated time to stop at, in s (default: the scene's duration), e.g. --until 5",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
 
 
 def _folder_resume_options(p: argparse.ArgumentParser, every: str | None = None) -> None:
@@ -273,7 +278,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Sea-ice rubble DEM with rate-and-state friction (Taichi, CPU and GPU).",
     )
     parser.add_argument("--version", action="version", version=f"taichi-ice {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(
+        dest="command",
+        required=True,
+        metavar="COMMAND",
+        help="one of those below; taichi-ice COMMAND --help gives its options and examples",
+    )
 
     def add(name, help_, func):
         p = sub.add_parser(
@@ -287,8 +297,8 @@ def build_parser() -> argparse.ArgumentParser:
         return p
 
     p = add("run", "run one scene and write its HDF5 file", _cmd_run)
-    p.add_argument("scene", help="scene file (TOML), e.g. scenarios/pushed_field.toml")
-    p.add_argument("--out", help="HDF5 output (default runs/<scene>.h5)")
+    p.add_argument("scene", help=scene_help("the scene to run"))
+    p.add_argument("--out", help="HDF5 run file to write (default runs/<scene>.h5)")
     p.add_argument(
         "--friction",
         type=parse_friction,
@@ -296,14 +306,25 @@ def build_parser() -> argparse.ArgumentParser:
         help="override the scene's law: coulomb[:MU] or rate-state[:A=..,B=..,...]",
     )
     _engine_options(p)
-    p.add_argument("--dt", type=parse_dt, default=None, help="'auto' (default) or seconds")
+    p.add_argument(
+        "--dt",
+        type=parse_dt,
+        default=None,
+        metavar="SECONDS",
+        help="time step in s, e.g. --dt 5e-5, or 'auto' (the default: the scene's dt, a "
+        "share of the contact stability limit)",
+    )
     p.add_argument(
         "--force-dt",
         action="store_true",
         help="accept a dt above the stability limit (for stability studies)",
     )
     p.add_argument(
-        "--slots", type=slots_per_body, default=None, help="contact slots per body (1-64)"
+        "--slots",
+        type=slots_per_body,
+        default=None,
+        metavar="N",
+        help=SLOTS_HELP,
     )
     p.add_argument(
         "--integrator",
@@ -336,7 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = add(
         "validate", "check the friction law against its exact solutions (Figure 3)", _cmd_validate
     )
-    p.add_argument("--out", default="out/validation", help="output folder")
+    p.add_argument("--out", default="out/validation", help="output folder (default out/validation)")
     p.add_argument("--speed", action="store_true", help="also chart speed against accuracy")
     p.add_argument(
         "--dem",
@@ -359,7 +380,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=16,
         help="other jittered layouts per model, run as batched worlds (default 16; 0 skips)",
     )
-    p.add_argument("--scene", default=None, help="scene file (default scenarios/pillar.toml)")
+    p.add_argument(
+        "--scene",
+        default=None,
+        help=scene_help("the scene of the four models' runs (default: pillar)"),
+    )
     _engine_options(p)
     p.add_argument("--quick", action="store_true", help="small sizes for Figure 3 (for tests)")
     p.add_argument(
@@ -376,9 +401,14 @@ def build_parser() -> argparse.ArgumentParser:
         "one scene over many seeds (and laws) as batched worlds: metrics, spread chart",
         _cmd_ensemble,
     )
-    p.add_argument("scene", help="scene file (TOML)")
+    p.add_argument("scene", help=scene_help("the scene whose layouts are run"))
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--seeds", type=positive_int, default=16, help="layouts (default 16)")
+    p.add_argument(
+        "--seeds",
+        type=positive_int,
+        default=16,
+        help="layouts: jittered fields from the scene's seed on, one world each (default 16)",
+    )
     p.add_argument(
         "--friction",
         type=parse_friction,
@@ -416,16 +446,21 @@ def build_parser() -> argparse.ArgumentParser:
     add_options(p)
 
     p = add("plot", "figures (and an animation) of a run file", _cmd_plot)
-    p.add_argument("run", help="HDF5 run file")
+    p.add_argument("run", help="HDF5 run file that taichi-ice run wrote (also while it runs)")
     p.add_argument("--out", default=None, help="folder for the figures (default: beside the file)")
-    p.add_argument("--animate", action="store_true", help="also write an animation (GIF)")
+    p.add_argument(
+        "--animate",
+        action="store_true",
+        help="also write RUN.gif: every frame of the run beside the probe force, 10 images "
+        "a second",
+    )
 
     p = add(
         "export",
         "a run file's frames for ParaView: floes as polygons with their velocity (VTK files)",
         _cmd_export,
     )
-    p.add_argument("run", help="HDF5 run file")
+    p.add_argument("run", help="HDF5 run file that taichi-ice run wrote")
     p.add_argument(
         "--vtk",
         required=True,

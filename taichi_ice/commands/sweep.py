@@ -16,6 +16,7 @@ from pathlib import Path
 from ..experiments.sweep.run import MAX_WORKERS, run_sweep
 from ..experiments.sweep.spec import Sweep, SweepError, not_utf8, sweep_from_dict
 from .args import nonnegative_int, parse_friction, positive_int
+from .help_text import scene_help
 
 __all__ = ["EXAMPLES", "add_cluster_options", "add_options", "sweep_command", "sweep_from_args"]
 
@@ -33,7 +34,7 @@ def add_options(p) -> None:
     p.epilog = EXAMPLES
     p.add_argument("sweep", nargs="?", help="sweep file (TOML); or give --scene and the axes")
     p.add_argument("--out", required=True, help="output folder (an existing one is resumed)")
-    p.add_argument("--scene", help="scene file or bundled scene name (without a sweep file)")
+    p.add_argument("--scene", help=scene_help("the scene to sweep, without a sweep file"))
     p.add_argument(
         "--seeds",
         help="layouts: a count from the scene's seed (8), a range (0-15) or a list (0,3,7)",

@@ -122,6 +122,8 @@ def _run_scene(args, scene, out: str) -> int:
         + (f"; WARNING: {sim.forced_note}" if sim.forced_note else ""),
         file=sys.stderr,
     )
+    for note in scene.notes:  # outlines a tessellation or a file had simplified or hulled
+        print(f"note: {note}", file=sys.stderr)
     result = sim.run(
         until=args.until,
         out=out,

@@ -261,8 +261,11 @@ class Scene:
         simulation, ice, water, friction: the tables (``water`` is ``None`` for no drag;
             ``friction`` a ``taichi_ice.physics.friction.Coulomb`` or ``RateState``).
         bodies: every body: ``[[body]]`` tables in file order, then each field row by row.
-        fields: the ``[[field]]`` specifications, in file order.
+        fields: the ``[[field]]`` specifications, in file order: ``FieldSpec`` (a lattice),
+            ``voronoi.VoronoiField`` or ``floes.FileField``.
         raw: the input tables as given (defaults not filled); do not modify.
+        notes: what was changed to make the floes of a tessellation or a file (outlines
+            simplified or hulled, with the largest area change); ``taichi-ice run`` prints them.
     """
 
     source: str
@@ -272,8 +275,10 @@ class Scene:
     water: WaterProperties | None
     friction: Coulomb | RateState
     bodies: tuple[Body, ...]
-    fields: tuple[FieldSpec, ...] = ()
+    # FieldSpec, voronoi.VoronoiField or floes.FileField (which import this module).
+    fields: tuple[Any, ...] = ()
     raw: Mapping[str, Any] = dataclasses.field(default_factory=dict, repr=False)
+    notes: tuple[str, ...] = ()
 
     @property
     def n_bodies(self) -> int:

@@ -198,13 +198,18 @@ def scene_from_dict(
     ]
     # Before any block is made: a field of 1e7 rows would otherwise fill the memory first.
     check_size(
-        len(bodies) + sum(spec.rows * spec.columns for spec in specs),
+        len(bodies) + sum(spec.size for spec in specs),
         f"{source}: [[field]] rows x columns",
         fix="lower rows or columns (or run on a machine with more memory)",
     )
     rng = np.random.default_rng(simulation.seed)
+    notes: list[str] = []
     for i, spec in enumerate(specs):
-        for body in spec.layout(rng):
+        made = spec.layout(rng)
+        if isinstance(made, tuple):  # a tessellation or a file: the floes and notes on them
+            made, said = made
+            notes.extend(said)
+        for body in made:
             bodies.append(body)
             labels.append(f"[[field]] #{i} block '{body.name}'")
     if not bodies:
@@ -222,6 +227,7 @@ def scene_from_dict(
         bodies=tuple(bodies),
         fields=tuple(specs),
         raw=raw,
+        notes=tuple(notes),
     )
     _check_mass(scene, labels)
     _check_extent(scene, labels)
@@ -231,7 +237,8 @@ def scene_from_dict(
 
 
 def reseeded(scene: Scene, seed: int) -> Scene:
-    """``scene`` with the field jitter drawn from ``seed``; nothing else changes.
+    """``scene`` with the field jitter drawn from ``seed``, and the tessellation of each
+    Voronoi field that has no ``seed`` of its own; nothing else changes.
 
     ``text`` is regenerated (without the file's comments) so that it rebuilds this scene.
     The scene is parsed and checked whole again (the new jitter may make blocks overlap),
@@ -376,5 +383,6 @@ def _check_overlaps(scene: Scene, labels: list[str]) -> None:
         f"{scene.source}: {labels[i]} and {labels[j]} overlap at the start by {area:.3g} m^2 "
         f"({100.0 * area / smaller:.3g}% of the smaller){more}; centroids at "
         f"{np.round(a.position, 6).tolist()} and {np.round(b.position, 6).tolist()}: move them "
-        "apart (or, in a field, raise spacing or lower jitter)"
+        "apart (or, in a field, raise spacing or lower jitter; floes read from a file: "
+        "correct their outlines)"
     )

@@ -25,6 +25,7 @@ from ..errors import ScenarioError
 from ..physics import polygon
 from ..physics.timestep import DEFAULT_SAFETY
 from ..readonly import frozen
+from .floes import FILE_KEYS, FileField, parse_file_field
 from .model import (
     DEFAULT_OUTPUT_INTERVAL,
     DEFAULT_SERIES_INTERVAL,
@@ -37,6 +38,7 @@ from .model import (
     WaterProperties,
 )
 from .table import REQUIRED, Table, type_name
+from .voronoi import VORONOI_KEYS, VoronoiField, parse_voronoi
 
 if TYPE_CHECKING:
     from ..physics.friction import Law
@@ -44,6 +46,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BODY_KEYS",
     "FIELD_KEYS",
+    "FIELD_KINDS",
     "ICE_KEYS",
     "SIMULATION_KEYS",
     "WATER_KEYS",
@@ -77,6 +80,7 @@ BODY_KEYS = (
 )
 FIELD_KEYS = (
     "name",
+    "kind",
     "shape",
     "width",
     "length",
@@ -92,6 +96,9 @@ FIELD_KEYS = (
     "omega",
     "velocity_jitter",
 )
+# What a [[field]] lays out: a lattice of one outline (the keys above), a tessellation of a
+# region (voronoi.VORONOI_KEYS) or the floes of a GeoJSON file (floes.FILE_KEYS).
+FIELD_KINDS = ("lattice", "voronoi", "file")
 
 
 # --------------------------------------------------------------------------------------------
@@ -287,8 +294,11 @@ def parse_body(source: str, index: int, data: Any) -> Body:
     )
 
 
-def parse_field(source: str, index: int, data: Any) -> FieldSpec:
-    """The ``[[field]]`` table number ``index``, as written (``FieldSpec.layout`` lays it out)."""
+def parse_field(source: str, index: int, data: Any) -> FieldSpec | VoronoiField | FileField:
+    """The ``[[field]]`` table number ``index``, as written (its ``layout`` lays it out):
+    a lattice (``kind = "lattice"``, the default), a tessellation (``"voronoi"``,
+    ``taichi_ice.scene.voronoi``) or the floes of a GeoJSON file (``"file"``,
+    ``taichi_ice.scene.floes``)."""
     label = f"[[field]] #{index}"
     name = f"field{index}"
     if isinstance(data, Mapping) and "name" in data:
@@ -300,6 +310,13 @@ def parse_field(source: str, index: int, data: Any) -> FieldSpec:
             )
     if isinstance(data, Mapping):
         label = f"{label} '{name}'"
+        kind = Table(source, label, {"kind": data.get("kind", "lattice")}, ("kind",)).string(
+            "kind", choices=FIELD_KINDS
+        )
+        if kind == "voronoi":
+            return parse_voronoi(Table(source, label, data, VORONOI_KEYS), name)
+        if kind == "file":
+            return parse_file_field(Table(source, label, data, FILE_KEYS), name)
     t = Table(source, label, data, FIELD_KEYS)
     shape = t.string("shape", REQUIRED, SHAPES)
     vertices, centroid = _centred(_outline(t, shape))

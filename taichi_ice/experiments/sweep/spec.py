@@ -545,7 +545,17 @@ def _check_override_key(where: str, key: str, scene) -> None:
         plural = "bodies" if kind == "body" else "fields"
         raise SweepError(f"{where}: the scene has no {kind} named '{name}'; its {plural}: {listed}")
     keys = (BODY_KEYS if kind == "body" else FIELD_KEYS) + _DERIVED[kind]
-    _known(where, leaf, tuple(k for k in keys if k != "name"))
+    if kind == "field":
+        # A tessellation or a file field takes its own keys (concentration, floes, ...), and
+        # of the derived ones only speed: area_fraction sets a lattice's spacing.
+        from ...scene.floes import FILE_KEYS
+        from ...scene.voronoi import VORONOI_KEYS
+
+        own = {"voronoi": VORONOI_KEYS, "file": FILE_KEYS}
+        spec = next(f for f in scene.fields if f.name == name)
+        if getattr(spec, "kind", "lattice") in own:
+            keys = (*own[spec.kind], "speed")
+    _known(where, leaf, tuple(k for k in keys if k not in ("name", "kind")))
 
 
 def _known(where: str, leaf: str, keys: Sequence[str], what: str = "key") -> None:

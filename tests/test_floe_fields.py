@@ -6,6 +6,8 @@ intersections and containment, a maximum-likelihood fit (SciPy) for the size dis
 exponent, the GeoJSON written by ``shapely.geometry.mapping``.
 """
 
+from __future__ import annotations
+
 import json
 import math
 import textwrap

@@ -5,6 +5,8 @@ References are independent of the code under test: shapely's Voronoi diagram, co
 areas and predicates, and the power distance minimised point by point.
 """
 
+from __future__ import annotations
+
 import numpy as np
 import pytest
 import shapely

@@ -132,7 +132,8 @@ def run_study(
         results, out, until=first.sweep(until).until, arch=arch, precision=precision
     )
     summary["wall_time"] = time.perf_counter() - start
-    (out / "study.json").write_text(json.dumps(summary, indent=1, allow_nan=True) + "\n")
+    # Compact: every world's values make it megabytes; study.md is the file for people.
+    (out / "study.json").write_text(json.dumps(summary, separators=(",", ":"), allow_nan=True))
     if progress:
         print(
             f"study: done in {summary['wall_time']:.0f} s; wrote {out}/study.md, study.json, "

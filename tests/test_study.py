@@ -217,6 +217,14 @@ def test_step_bias_finds_a_set_shift_and_no_other(summary):
             assert r["shift"] == 0.0 and r["wilcoxon_p"] == 1.0
         if "mcnemar" in r:
             assert r["mcnemar"]["only_a"] == r["mcnemar"]["only_b"] == 0
+    # No claim reads the frictional energy: every claim is the same at both steps.
+    assert len(step["claims"]) == 23
+    for c in step["claims"]:
+        assert c["default"]["n"] == c["half"]["n"] == LAYOUTS // 2
+        assert c["default"]["p"] == c["half"]["p"]
+        assert c["default"]["effect"] == c["half"]["effect"] or (
+            np.isnan(c["default"]["effect"]) and np.isnan(c["half"]["effect"])
+        )
 
 
 def test_report_writes_json_markdown_netcdf_and_figures(summary):

@@ -59,14 +59,15 @@ def study_summary(results: dict, *, until: float, arch: str, precision: str) -> 
         if a.kind != "step":
             continue
         base = next(n for n, b in arms.items() if b.kind == "stratum" and b.fraction == a.fraction)
-        seeds = a.seeds
+        default, half = cells(rows, base, a.seeds), cells(rows, name)
         steps.append(
             {
                 "arm": name,
                 "against": base,
                 "area_fraction": a.fraction,
                 "dt_safety": a.dt_safety,
-                "rows": step_bias(cells(rows, base, seeds), cells(rows, name), cells(rows, base)),
+                "rows": step_bias(default, half, cells(rows, base)),
+                "claims": step_claims(default, half),
             }
         )
     scene = load_scenario("pillar")
@@ -119,6 +120,26 @@ def study_summary(results: dict, *, until: float, arch: str, precision: str) -> 
             for r in rows
         ],
     }
+
+
+def step_claims(default: dict, half: dict) -> list[dict]:
+    """Every claim on the same layouts at the default step and at half of it: each one's
+    effect, interval and unadjusted p at both, so a reader sees whether the step moves a
+    verdict (Holm's adjustment is the main table's; these are on fewer layouts)."""
+    out = []
+    for d, h in zip(stratum_claims(default), stratum_claims(half)):
+        out.append(
+            {
+                "claim": d["claim"],
+                "model": d.get("model"),
+                "direction": d["direction"],
+                **{
+                    key: {k: c[k] for k in ("n", "effect", "ci", "p")}
+                    for key, c in (("default", d), ("half", h))
+                },
+            }
+        )
+    return out
 
 
 def write_dataset(rows: list[dict], path: Path) -> Path:
@@ -261,6 +282,20 @@ def step_table(step: dict) -> list[str]:
             f"| {q['shift']:+.3g} [{q['low']:+.3g}, {q['high']:+.3g}] "
             f"| {r['shift_over_se']:.2f} |"
         )
+    lines += [
+        "",
+        "Each claim on these layouts at both steps (effect [95 % CI], unadjusted p):",
+        "",
+        "| claim | model | default step | half step |",
+        "|---|---|---:|---:|",
+    ]
+    for c in step["claims"]:
+        cells = []
+        for key in ("default", "half"):
+            e = c[key]
+            lo, hi = e["ci"]
+            cells.append(f"{e['effect']:+.3g} [{lo:+.3g}, {hi:+.3g}], p {_p(e['p'])}")
+        lines.append(f"| {c['claim']} | {c['model'] or ''} | {cells[0]} | {cells[1]} |")
     binary = [r for r in step["rows"] if "mcnemar" in r]
     lines += ["", "| model | outcome | default step | half step | discordant | McNemar p |"]
     lines += ["|---|---|---:|---:|---:|---:|"]

@@ -10,7 +10,7 @@ OUT    ?= out
 # make test's pytest workers: one per core, at most 4 (each is a Taichi process of ~1-2 GB)
 JOBS   ?= $(shell n=$$(nproc 2>/dev/null || echo 2); [ $$n -gt 4 ] && n=4; echo $$n)
 
-.PHONY: run test test-vulkan vulkan-device validate lint bench clean
+.PHONY: run test test-vulkan vulkan-device validate lint bench docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,17 @@ test-vulkan: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check taichi_ice tests validation benchmarks
 	$(BIN)/ruff format --check taichi_ice tests validation benchmarks
+
+# The documentation site into site/ (open site/index.html), every warning an error: a broken
+# link, anchor or snippet, a page left out of the nav, a docstring the reference cannot read.
+# tests/test_docs.py builds it the same way in make test.
+DOCS_STAMP := $(VENV)/.docs-stamp
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 bench: $(STAMP)
 	$(BIN)/taichi-ice bench --out $(OUT)/bench

@@ -41,6 +41,9 @@ def test_the_site_builds_with_no_warning(tmp_path: Path) -> None:
     # The reference was read from the docstrings, not left as an empty page.
     reference = (site / "reference" / "scene" / "index.html").read_text(encoding="utf-8")
     assert "scene_from_dict" in reference and "ScenarioError" in reference
+    # The command-line reference was generated from the parser (docs/hooks/cli_reference.py).
+    cli = (site / "reference" / "cli" / "index.html").read_text(encoding="utf-8")
+    assert "usage: taichi-ice sweep" in cli and "--scheduler" in cli
     # The example code is included from examples/, as the tests run it (not left a marker).
     examples = (site / "examples" / "index.html").read_text(encoding="utf-8")
     assert "channel_scene" in examples and "--8&lt;--" not in examples

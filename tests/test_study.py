@@ -194,6 +194,9 @@ def test_descriptions_release_curves_and_power(summary):
     )
     assert d["rate-state"]["release"]["median"] == 2.0
     assert d["mu0.9"]["release"]["median"] is None and d["mu0.9"]["release"]["events"] == 0
+    # mu = 0.9's runs followed 15 - 0.1 i s after their peak (i = 0..15): median 14.25 s.
+    assert d["mu0.9"]["release"]["censored_followup_median"] == pytest.approx(14.25)
+    assert d["rate-state"]["release"]["censored_followup_median"] is None
     assert d["mu0.1"]["jam"]["k"] == 0
     claims = s["claims"]["no strength"]
     more = next(c for c in claims if c["claim"] == "higher friction jams more")

@@ -221,7 +221,10 @@ def _release(e: dict) -> str:
     if not e["n"]:
         return "-"
     median = "not reached" if e["median"] is None else f"{e['median']:.1f} s"
-    return f"{median} ({e['events']} of {e['n']} released)"
+    said = f"{median} ({e['events']} of {e['n']} released"
+    if e["censored_followup_median"] is not None:
+        said += f"; the others followed {e['censored_followup_median']:.1f} s"
+    return said + ")"
 
 
 def describe_table(entry: dict) -> list[str]:
@@ -337,7 +340,9 @@ def study_markdown(s: dict) -> str:
         "Held at the end: a jam whose force over the last second is not below a tenth of its "
         "peak. Time to release: from the peak to the first second whose mean force is below "
         "a tenth of it, over the layouts that jammed, Kaplan-Meier with the run's end as "
-        "censoring. Proportions: k/n [exact 95 % CI]; measures: median [quartiles].",
+        "censoring; the runs not released were followed (from their peak to the end) the "
+        "median time given: 0 s where the peak is the last sample, a jam still building. "
+        "Proportions: k/n [exact 95 % CI]; measures: median [quartiles].",
         "",
     ]
     for d in s["design"]:

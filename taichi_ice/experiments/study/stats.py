@@ -204,12 +204,22 @@ def release_curve(cell: dict) -> dict:
     t, seen = cell["release_time"][jam], cell["release_observed"][jam] == 1
     keep = np.isfinite(t)
     if not keep.any():
-        return {"n": 0, "events": 0, "median": None, "curve": None}
+        return {
+            "n": 0,
+            "events": 0,
+            "median": None,
+            "censored_followup_median": None,
+            "curve": None,
+        }
     km = inference.kaplan_meier(t[keep], seen[keep])
+    censored = t[keep][~seen[keep]]
     return {
         "n": int(keep.sum()),
         "events": int(seen[keep].sum()),
         "median": km["median"],
+        # How long the runs still held were followed after their peak: 0 where the peak is
+        # the run's last sample (a jam still building when the run ends).
+        "censored_followup_median": float(np.median(censored)) if censored.size else None,
         "curve": km,
     }
 

@@ -109,6 +109,7 @@ class ContactForce(NamedTuple):
     shift: np.ndarray | None = None
     shift_torque_owner: float = 0.0
     shift_torque_partner: float = 0.0
+    sliding: bool = False
 
 
 def _cross(a, b) -> float:
@@ -281,11 +282,15 @@ def contact_force(
         )
 
     shift = None
+    # Whether the cap binds, by the very test of ``stick_or_slide`` and ``tangential_force``
+    # (the same operations in the same order, so the same answer to the last bit).
     if exact:
+        sliding = abs(p_t) > mu * f_n * dt
         f_t, g_t, xi_new, slip_work, damp_work = stick_or_slide(
             p_t, q_t, old.xi, xi1, slip, dt, k_t, c_t, mu * f_n * dt, mu * q_n
         )
     else:
+        sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n
         f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
     force = f_n * normal + f_t * tangent
     if analytic:
@@ -343,4 +348,5 @@ def contact_force(
         shift=shift,
         shift_torque_owner=0.0 if shift is None else -_cross(r_i, shift),
         shift_torque_partner=0.0 if shift is None else _cross(r_j, shift),
+        sliding=bool(sliding),
     )

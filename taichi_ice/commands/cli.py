@@ -35,7 +35,15 @@ EXAMPLES = {
   taichi-ice run scenarios/pushed_field.toml --friction rate-state --until 5
   taichi-ice run scenarios/two_squares.toml --friction coulomb:0.3 --dt 5e-5 --precision f32
   taichi-ice run scenarios/pillar.toml --out runs/p.h5 --checkpoint-every 10min
-  taichi-ice run scenarios/pillar.toml --out runs/p.h5 --resume     # after a kill or failure""",
+  taichi-ice run scenarios/pillar.toml --out runs/p.h5 --resume     # after a kill or failure
+  taichi-ice run scenarios/pushed_field.toml --contacts   # + every contact at every frame
+
+--contacts adds the group /contacts to the run file: at every frame, one row per contact
+(body_a, body_b, point, normal, width, overlap area, force_normal and force_tangential on
+body_b, slip_rate, theta, mu, stuck), the forces of the step that starts at the frame; open
+it with xarray.open_dataset(FILE, group="contacts"), see its force chains with taichi-ice
+plot and export. The run itself is the same bit for bit; the rows cost about 0.2 ms of host
+time per contact per frame.""",
     "validate": """examples:
   taichi-ice validate --out out/validation          # Figure 3, exact solutions, stability
   taichi-ice validate --out out/validation --speed  # + speed against accuracy (minutes)
@@ -112,6 +120,7 @@ def _run_scene(args, scene, out: str) -> int:
         force_dt=args.force_dt,
         slots=args.slots,
         integrator=args.integrator,
+        contacts=args.contacts,
     )
     law = sim.scenes[0].friction
     ran = sim.arch_used if sim.arch_used == args.arch else f"{sim.arch_used} (--arch {args.arch})"
@@ -335,6 +344,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="euler: contact forces of the step's start (first order, the default); "
         "analytic: each contact's spring-dashpot solved over the step (second order; "
         "docs/accuracy.md)",
+    )
+    p.add_argument(
+        "--contacts",
+        action="store_true",
+        help="also write every contact at every frame to the group /contacts (pair, point, "
+        "normal, width, overlap, normal and tangential force, slip rate, theta, mu, stuck; "
+        "the step that starts at the frame); the run steps the same, bit for bit",
     )
     p.add_argument(
         "--checkpoint-every",

@@ -32,10 +32,19 @@ Layout (one file per world; DESIGN.md section 3):
   (CF allows it; GDAL reads a ring left open as an open, invalid polygon).
   ``names``, ``kinds``, ``mass`` and ``inertia`` carry ``geometry = "floe_outline"``. Convex
   floes are single polygons without holes: no ``part_node_count`` or ``interior_ring``.
+- ``/contacts/`` (only when asked: ``Simulation(contacts=True)``, ``run --contacts``): every
+  contact at every frame, the frames' rows one after the other on the dimension ``contact``
+  (a CF-1.8 contiguous ragged array, CF section 9.3.3 and appendix H.2.4: ``row_size`` (F,)
+  on ``time`` counts each frame's rows, ``sample_dimension = "contact"``): ``time`` (F,),
+  ``body_a`` and ``body_b``, ``point`` and ``normal`` (C, 2), ``width`` (m), ``overlap``
+  (area, m^2), ``force_normal`` and ``force_tangential`` (N: on ``body_b``; ``body_a`` takes
+  the opposite), ``slip_rate`` (m/s), ``theta``, ``mu`` and ``stuck`` (C,). A frame's rows
+  are the contacts of the step that starts at its time (``taichi_ice.engine.contact_rows``).
 
 Every variable has ``units`` (but the strings) and ``long_name``; each group's ``time`` is its
 dimension. ``xarray.open_dataset(path, group="series")`` (and ``"frames"``, ``"bodies"``)
-reads a group with no other option; ``open_run(path)`` returns the whole run as one Dataset.
+(and ``"contacts"``) reads a group with no other option; ``open_run(path)`` returns the whole
+run as one Dataset.
 
 Writing: rows are kept in memory and written every frame, each time in one short open of
 the file that extends every series together, then closes it. Between writes the file is
@@ -64,6 +73,7 @@ import numpy as np
 from .. import provenance
 from ..errors import OutputError
 from . import budget
+from .runfile_contacts import CONTACT_DIMS, CONTACT_VARIABLES, append, create, cut
 from .runfile_read import check_checkpoint_match, check_run_file
 
 __all__ = [
@@ -80,6 +90,8 @@ __all__ = [
 
 # Version of this layout; a reader refuses a file with another major version. 2.1: the
 # floes as CF geometries in /bodies (added only: every reader reads 2.0 files as before).
+# /contacts, written only when asked, is an optional group of 2.1: its presence says it, and
+# a file without it is the file of before, attribute for attribute.
 FORMAT_VERSION = "2.1"
 CONVENTIONS = "CF-1.8"
 
@@ -129,6 +141,7 @@ VARIABLES: dict[str, dict[str, tuple[str, str]]] = {
         "floe_outline_x": ("m", "x of the floe outline nodes in the world at time 0"),
         "floe_outline_y": ("m", "y of the floe outline nodes in the world at time 0"),
     },
+    "contacts": CONTACT_VARIABLES,
 }
 # The floes as CF-1.8 polygon geometries (CF section 7.5): the container's attributes, and
 # the per-body variables (on the instance dimension, body) that it describes.
@@ -167,6 +180,7 @@ DIMS: dict[str, dict[str, tuple[str, ...]]] = {
         "floe_outline_x": ("outline_node",),
         "floe_outline_y": ("outline_node",),
     },
+    "contacts": CONTACT_DIMS,
 }
 # Attributes every run file has from its start (so a reader always finds them).
 _PLACEHOLDERS = {
@@ -236,6 +250,8 @@ class RunWriter:
         run_id: with ``resume``, the ``run_id`` the checkpoint recorded for this file (None:
             a checkpoint written before run ids, not checked). A file of another run, or one
             with fewer rows than the checkpoint counts, is refused before anything changes.
+        contacts: write the ``/contacts`` group (``add_frame(..., contacts=rows)``); on
+            ``resume`` the file must have it exactly when asked.
 
     Every new file gets a ``run_id`` attribute (random, 32 hex digits) that its checkpoints
     record, so that a resume never continues one run from another's checkpoint.
@@ -248,8 +264,13 @@ class RunWriter:
         attrs: Mapping[str, object],
         resume: tuple[int, int] | None = None,
         run_id: str | None = None,
+        contacts: bool = False,
     ):
         self.path = Path(path)
+        self.contacts: dict[str, list] | None = None
+        if contacts:
+            self.contacts = {k: [] for k in VARIABLES["contacts"] if k != "contact"}
+        self.n_rows = 0  # contact rows written
         self.series: dict[str, list] = {k: [] for k in ("time", "probe_force", "n_contacts")}
         self.series.update({k: [] for k in budget.SERIES})
         self.frames: dict[str, list] = {
@@ -260,12 +281,16 @@ class RunWriter:
             self.n_samples, self.n_frames = resume
             with _open_for_write(self.path) as f:
                 check_run_file(f, self.path)
-                check_checkpoint_match(f, self.path, run_id, self.n_samples, self.n_frames)
+                check_checkpoint_match(
+                    f, self.path, run_id, self.n_samples, self.n_frames, contacts=contacts
+                )
                 self.run_id = str(f.attrs.get("run_id", ""))
                 for ds in f["series"].values():
                     ds.resize(self.n_samples, axis=0)
                 for ds in f["frames"].values():
                     ds.resize(self.n_frames, axis=0)
+                if contacts:
+                    self.n_rows = cut(f["contacts"], self.n_frames)
                 f.attrs["status"] = "running"
                 f.attrs["failure"] = ""
                 f.attrs["resumed"] = int(f.attrs.get("resumed", 0)) + 1
@@ -359,6 +384,8 @@ class RunWriter:
                 _describe(ds, group, name)
                 ds.dims[0].attach_scale(time)
                 _attach(f, ds, DIMS.get(group, {}).get(name, ("time",)), skip=1)
+        if self.contacts is not None:
+            create(f)
 
     def add_sample(self, time: float, probe_force, energies, n_contacts: int) -> None:
         """One time-series row: probe_force (P, 2) N, energies in budget.SERIES order (J)."""
@@ -367,8 +394,17 @@ class RunWriter:
         for name, value in row.items():
             self.series[name].append(np.asarray(value))
 
-    def add_frame(self, time: float, position, angle, velocity, omega) -> None:
-        """One frame of every body's state."""
+    def add_frame(self, time: float, position, angle, velocity, omega, contacts=None) -> None:
+        """One frame of every body's state, and with ``contacts`` (the writer's option) its
+        contact rows: ``{name: array}`` of ``engine.contact_rows.ROW_NAMES``."""
+        if self.contacts is not None:
+            if contacts is None:
+                raise ValueError(f"{self.path}: a frame of a run with /contacts needs its rows")
+            self.contacts["time"].append(np.float64(time))
+            self.contacts["row_size"].append(np.int64(len(contacts["body_a"])))
+            for name, values in contacts.items():
+                self.contacts[name].append(np.asarray(values))
+                self._buffered += self.contacts[name][-1].nbytes
         row = {
             "time": time,
             "position": position,
@@ -416,6 +452,8 @@ class RunWriter:
                 ds[start : start + k] = np.stack(values)
                 values.clear()
             setattr(self, count, start + k)
+        if self.contacts is not None and self.contacts["time"]:
+            self.n_rows = append(f["contacts"], self.contacts, self.n_rows)
         self._buffered = 0
         f.attrs["steps"] = steps
         for key, value in attrs.items():
@@ -432,7 +470,8 @@ class RunWriter:
             check_room(self.path, self._needed(), "writing the last rows")
         except DiskFullError as exc:
             full = exc if status == "complete" else None
-            for rows in (*self.series.values(), *self.frames.values()):
+            kept = (self.contacts or {}).values()
+            for rows in (*self.series.values(), *self.frames.values(), *kept):
                 rows.clear()
             self._buffered = 0
             if "the disk is full" not in failure:

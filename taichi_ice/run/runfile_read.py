@@ -24,6 +24,7 @@ __all__ = [
     "check_resumable",
     "check_run_file",
     "damaged",
+    "frame_contacts",
     "open_file",
     "open_run",
     "read_run",
@@ -34,26 +35,38 @@ _READ_TRIES = 20
 _READ_PAUSE = 0.05  # s
 
 
-def check_resumable(path, run_id: str | None, samples: int, frames: int) -> None:
+def check_resumable(
+    path, run_id: str | None, samples: int, frames: int, contacts: bool | None = None
+) -> None:
     """Raise RunFileError unless the run file at ``path`` is the one a checkpoint recorded
-    (``run_id``, None: not checked) and holds the ``samples`` and ``frames`` it counts; the
-    file is only read (a batch checks every file before changing any)."""
+    (``run_id``, None: not checked) and holds the ``samples`` and ``frames`` it counts (and
+    ``/contacts`` exactly if ``contacts``; None: not checked); the file is only read (a
+    batch checks every file before changing any)."""
     with open_file(path) as f:
-        check_checkpoint_match(f, path, run_id, samples, frames)
+        check_checkpoint_match(f, path, run_id, samples, frames, contacts=contacts)
 
 
 def check_checkpoint_match(
-    f: h5py.File, path, run_id: str | None, samples: int, frames: int
+    f: h5py.File, path, run_id: str | None, samples: int, frames: int, contacts=None
 ) -> None:
     """Refuse to resume ``f`` from a checkpoint of another run, or from one that counts more
-    rows than the file holds (the file was replaced after the checkpoint was taken)."""
+    rows than the file holds (the file was replaced after the checkpoint was taken); and,
+    ``contacts`` not None, a run that writes ``/contacts`` (or not) into a file that does not
+    have it (or does)."""
     fix = "start anew with --overwrite (resume=False), which removes the checkpoint"
     if run_id is not None and str(f.attrs.get("run_id", "")) != run_id:
         raise RunFileError(
             f"{path}: its checkpoint belongs to another run (run ids differ: the file was "
             f"replaced or the checkpoint copied from elsewhere); {fix}"
         )
+    if contacts is not None and contacts != ("contacts" in f):
+        raise RunFileError(
+            f"{path}: the run was started {'without' if contacts else 'with'} --contacts "
+            f"(contacts={not contacts}); resume it the same way"
+        )
     held = (len(f["series"]["time"]), len(f["frames"]["time"]))
+    if contacts and len(f["contacts"]["time"]) < frames:
+        held = (held[0], len(f["contacts"]["time"]))
     if held[0] < samples or held[1] < frames:
         raise RunFileError(
             f"{path}: holds {held[0]} samples and {held[1]} frames, fewer than the "
@@ -121,7 +134,9 @@ def open_file(path: str | Path):
 
 
 def read_run(path: str | Path) -> dict:
-    """Everything in a run file as NumPy arrays: ``{"attrs", "series", "frames", "bodies"}``.
+    """Everything in a run file as NumPy arrays: ``{"attrs", "series", "frames", "bodies"}``,
+    and ``"contacts"`` if the run wrote them (``runfile_contacts``; ``frame_contacts``
+    picks one frame's rows).
 
     Works on a file that is still being written, whose run failed, or was killed.
     """
@@ -131,7 +146,9 @@ def read_run(path: str | Path) -> dict:
             out["attrs"] = {
                 k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()
             }
-            for group in ("series", "frames", "bodies"):
+            for group in ("series", "frames", "bodies", "contacts"):
+                if group == "contacts" and group not in f:
+                    continue
                 out[group] = {}
                 for name, ds in f[group].items():
                     data = ds[()]
@@ -143,11 +160,23 @@ def read_run(path: str | Path) -> dict:
     return out
 
 
+def frame_contacts(run: dict, frame: int) -> dict[str, np.ndarray]:
+    """The contact rows of frame ``frame`` of ``run`` (``read_run``'s), ``{name: array}``
+    (every ``/contacts`` variable on ``contact``; none if the run wrote no contacts)."""
+    c = run.get("contacts")
+    if c is None:
+        return {}
+    ends = np.cumsum(c["row_size"])
+    rows = slice(int(ends[frame] - c["row_size"][frame]), int(ends[frame]))
+    return {k: v[rows] for k, v in c.items() if k not in ("time", "row_size")}
+
+
 def open_run(path: str | Path):
     """A run file as one ``xarray.Dataset`` (loaded into memory; the file is closed).
 
     Series keep the dimension ``time``; frames are on ``frame_time`` (their ``time``);
-    bodies on ``body``, ``vertex``, ``body_edge`` and ``probe``; the root attributes (the
+    bodies on ``body``, ``vertex``, ``body_edge`` and ``probe``; contacts, if the run wrote
+    them, on ``contact`` (their ``row_size`` on ``frame_time``); the root attributes (the
     run's provenance) are the Dataset's. Needs xarray with a netCDF-4 engine
     (``pip install 'taichi-ice[xarray]'``).
     """
@@ -157,16 +186,16 @@ def open_run(path: str | Path):
         raise RunFileError(
             "open_run needs xarray: pip install 'taichi-ice[xarray]' (or read_run for NumPy)"
         ) from None
-    with open_file(path):
-        pass  # the checks and their messages
+    with open_file(path) as f:
+        groups = [g for g in ("series", "frames", "bodies", "contacts") if g in f]
     parts = []
     for attempt in range(_READ_TRIES):
         try:
             root = xr.open_dataset(path).load()
-            for group in ("series", "frames", "bodies"):
+            for group in groups:
                 with xr.open_dataset(path, group=group) as ds:
                     part = ds.load()
-                if group == "frames":
+                if group in ("frames", "contacts"):
                     part = part.rename({"time": "frame_time"})
                 parts.append(part)
             break

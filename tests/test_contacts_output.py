@@ -9,7 +9,7 @@ the contact stage of the step taken from the frame's state), the probe force of 
 mean over that one step), and theta and the slip rate the step leaves in the contact slots.
 The geometry (overlap area, contact point, width, normal) is held against shapely's clip of
 the two floes at the frame; the stuck and sliding rows against Coulomb's cap; the files
-against xarray and the netCDF C library. A run without ``--contacts`` has
+against xarray, the netCDF C library and VTK's own reader. A run without ``--contacts`` has
 no group and is otherwise the same file, variable for variable; a run killed and resumed
 writes the rows of the run never stopped.
 
@@ -21,6 +21,7 @@ the floor), with rate-and-state interfaces under that law.
 from __future__ import annotations
 
 import copy
+import xml.etree.ElementTree as ET
 
 import h5py
 import numpy as np
@@ -33,6 +34,8 @@ from taichi_ice.engine.schema import FORCE_QUANTUM
 from taichi_ice.errors import RunFileError
 from taichi_ice.physics.slip import NO_INTERFACE_ABOVE
 from taichi_ice.run import checkpoint as ckpt
+from taichi_ice.run.export import export_vtk
+from taichi_ice.run.plots import positions_figure
 from taichi_ice.run.runfile import VARIABLES, RunWriter
 from taichi_ice.run.runfile_read import open_run, read_run
 from taichi_ice.scene.parse import scene_from_dict
@@ -360,6 +363,76 @@ def test_a_run_without_contacts_is_the_same_file_without_the_group(ran, tmp_path
         for key, value in g.attrs.items():
             if key not in own:
                 np.testing.assert_array_equal(f.attrs[key], value, err_msg=key)
+
+
+@pytest.mark.parametrize("binary", [True, False], ids=["binary", "ascii"])
+def test_vtk_reads_the_force_chains_as_lines_with_the_rows(ran, tmp_path, binary):
+    """``export`` writes each frame's contacts as lines (body_a's centroid, the contact
+    point, body_b's centroid) that VTK's own reader opens with the rows as cell data."""
+    pytest.importorskip("vtkmodules.vtkIOXML")
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkOutputWindow, vtkStringOutputWindow
+    from vtkmodules.vtkIOXML import vtkXMLPolyDataReader
+
+    _law, _sim, path, run, _engine = ran
+    pvd = export_vtk(path, tmp_path / "vtk", binary=binary)
+    chains = pvd.with_name(f"{path.stem}_contacts.pvd")
+    entries = ET.parse(chains).getroot().findall("Collection/DataSet")
+    frames = run["frames"]
+    assert len(entries) == len(frames["time"])
+    window = vtkStringOutputWindow()
+    before = vtkOutputWindow.GetInstance()
+    vtkOutputWindow.SetInstance(window)
+    try:
+        for f, entry in enumerate(entries):
+            assert float(entry.get("timestep")) == frames["time"][f]
+            reader = vtkXMLPolyDataReader()
+            reader.SetFileName(str(chains.parent / entry.get("file")))
+            reader.Update()
+            data = reader.GetOutput()
+            rows = frame_rows(run, f)
+            n = len(rows["body_a"])
+            assert data.GetNumberOfLines() == data.GetNumberOfCells() == n
+            assert data.GetNumberOfPolys() == 0
+            if n == 0:
+                continue
+            points = vtk_to_numpy(data.GetPoints().GetData()).reshape(n, 3, 3)
+            np.testing.assert_array_equal(points[:, 0, :2], frames["position"][f][rows["body_a"]])
+            np.testing.assert_array_equal(points[:, 1, :2], rows["point"])
+            np.testing.assert_array_equal(points[:, 2, :2], frames["position"][f][rows["body_b"]])
+            cells = data.GetCellData()
+            assert cells.GetScalars().GetName() == "force_normal"
+            for name in ("force_normal", "force_tangential", "slip_rate", "theta", "mu"):
+                got = vtk_to_numpy(cells.GetArray(name))
+                np.testing.assert_array_equal(got, rows[name], err_msg=name)
+            for name in ("stuck", "body_a", "body_b"):
+                np.testing.assert_array_equal(vtk_to_numpy(cells.GetArray(name)), rows[name])
+            force = vtk_to_numpy(cells.GetArray("force"))
+            on_b, _ = forces_on_bodies({k: v[:1] for k, v in rows.items()}, frames["position"][f])
+            np.testing.assert_allclose(force[0, :2], on_b[rows["body_b"][0]], rtol=1e-15)
+    finally:
+        vtkOutputWindow.SetInstance(before)
+    assert window.GetOutput() == ""
+
+
+def test_the_snapshots_draw_the_force_chains(ran):
+    """``taichi-ice plot``'s snapshots draw a line per contact, widest where the normal
+    force is largest."""
+    from matplotlib.collections import LineCollection
+
+    _law, _sim, _path, run, _engine = ran
+    fig = positions_figure(run, snapshots=3)
+    picks = [0, 5, 10]  # frames the three panels show
+    for ax, f in zip(fig.axes, picks):
+        lines = [c for c in ax.collections if isinstance(c, LineCollection)]
+        rows = frame_rows(run, f)
+        if not len(rows["body_a"]):
+            assert not lines
+            continue
+        (chains,) = lines
+        assert len(chains.get_segments()) == len(rows["body_a"])
+        widths = chains.get_linewidths()
+        assert np.argmax(widths) == np.argmax(rows["force_normal"])
 
 
 def test_a_resumed_run_keeps_writing_the_rows_of_the_run_never_stopped(tmp_path, monkeypatch):

@@ -80,8 +80,10 @@ ensemble never stopped.""",
 
 Each frame is a VTK PolyData file (.vtp): every floe a polygon, with cell data velocity,
 angular_velocity, body (index) and kind (0 dynamic, 1 fixed, 2 kinematic); the .pvd file
-collects them with their times. Contact force chains are not written: run files hold no
-per-contact data yet.""",
+collects them with their times. A run with per-contact rows (run --contacts) also gets its
+force chains, RUN_contacts_000000.vtp ... and RUN_contacts.pvd: a line per contact from one
+body's centroid through the contact point to the other's, with cell data force_normal,
+force_tangential, slip_rate, theta, mu, stuck, body_a and body_b.""",
     "plot": """examples:
   taichi-ice plot runs/pushed.h5                    # figures beside the file
   taichi-ice plot runs/pushed.h5 --out figs/ --animate""",
@@ -475,7 +477,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add(
         "export",
-        "a run file's frames for ParaView: floes as polygons with their velocity (VTK files)",
+        "a run file's frames for ParaView: floes as polygons with their velocity, and force "
+        "chains if the run wrote its contacts (VTK files)",
         _cmd_export,
     )
     p.add_argument("run", help="HDF5 run file that taichi-ice run wrote")

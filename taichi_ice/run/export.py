@@ -11,10 +11,15 @@
   counter-clockwise), ``body`` (index in scene order) and ``kind`` (0 dynamic, 1 fixed,
   2 kinematic), and the frame's time as field data ``TimeValue`` (s);
 - ``NAME.pvd``: the collection of those files with their times, which ParaView opens as one
-  time series.
-
-Contact force chains (lines between the bodies in contact, with the force) need per-contact
-output, which run files do not hold yet; only the floes are written.
+  time series;
+- for a run that wrote its contacts (``run --contacts``, ``/contacts``), the force chains:
+  ``NAME_contacts_000000.vtp``, ... and ``NAME_contacts.pvd``, a second time series beside
+  the floes (open both; colour the lines by ``force_normal``): one line per contact, from
+  ``body_a``'s centroid through the contact point to ``body_b``'s (a polyline of three
+  points), with cell data ``force_normal``, ``force_tangential`` (N, on ``body_b``),
+  ``force`` (N, on ``body_b``, 3 components, z = 0), ``slip_rate`` (m/s), ``theta`` (NaN
+  where none), ``mu``, ``stuck`` (1 stuck, 0 sliding), ``body_a`` and ``body_b``: the
+  frame's rows, the contacts of the step that starts at its time.
 
 Plain NumPy and the standard library (no VTK package): arrays are written inline, as
 base64 of little-endian bytes behind a UInt64 byte count (VTK's "binary" format), or as text
@@ -37,7 +42,7 @@ import numpy as np
 from ..codes import BodyKind
 from ..errors import OutputError, UsageError
 from .output import check_folder
-from .runfile_read import read_run
+from .runfile_read import frame_contacts, read_run
 
 __all__ = ["export_vtk", "floe_polygons"]
 
@@ -81,7 +86,9 @@ def _array(
     head = f'{indent}<DataArray type="{kind}"{named} NumberOfComponents="{components}"'
     if field:
         head += f' NumberOfTuples="{data.size // components}"'
-    if binary:
+    # VTK's text reader cannot read a NaN (theta where a contact has none): such an array is
+    # written in base64 whatever was asked (a file may mix the two, array by array).
+    if binary or (data.dtype.kind == "f" and not np.all(np.isfinite(data))):
         raw = data.tobytes()
         blob = base64.b64encode(np.uint64(len(raw)).astype("<u8").tobytes() + raw).decode()
         return f'{head} format="binary">{blob}</DataArray>\n'
@@ -93,8 +100,20 @@ def _array(
     return f'{head} format="ascii">{text}</DataArray>\n'
 
 
-def _polydata(points, offsets, cells: Mapping[str, tuple[np.ndarray, int]], time, binary):
-    n_points, n_polys = len(points), len(offsets) - 1
+def _polydata(
+    points,
+    offsets,
+    cells: Mapping[str, tuple[np.ndarray, int]],
+    time,
+    binary,
+    kind: str = "Polys",
+    attributes: str = 'Scalars="angular_velocity" Vectors="velocity"',
+):
+    """A PolyData file of cells of ``kind`` ("Polys" or "Lines"): cell ``k`` joins points
+    ``offsets[k]`` to ``offsets[k + 1]`` in turn; ``attributes``: the CellData's active
+    arrays."""
+    n_points, n_cells = len(points), len(offsets) - 1
+    n_lines, n_polys = (n_cells, 0) if kind == "Lines" else (0, n_cells)
     xyz = np.zeros((n_points, 3))
     xyz[:, :2] = points
     parts = [
@@ -104,21 +123,54 @@ def _polydata(points, offsets, cells: Mapping[str, tuple[np.ndarray, int]], time
         "    <FieldData>\n",
         _array("TimeValue", np.array([time], dtype="<f8"), 1, binary, "      ", field=True),
         "    </FieldData>\n",
-        f'    <Piece NumberOfPoints="{n_points}" NumberOfVerts="0" NumberOfLines="0" '
+        f'    <Piece NumberOfPoints="{n_points}" NumberOfVerts="0" NumberOfLines="{n_lines}" '
         f'NumberOfStrips="0" NumberOfPolys="{n_polys}">\n',
         "      <Points>\n",
         _array("Points", xyz, 3, binary, "        "),
         "      </Points>\n",
-        "      <Polys>\n",
+        f"      <{kind}>\n",
         _array("connectivity", np.arange(n_points, dtype="<i8"), 1, binary, "        "),
         _array("offsets", np.asarray(offsets[1:], dtype="<i8"), 1, binary, "        "),
-        "      </Polys>\n",
-        '      <CellData Scalars="angular_velocity" Vectors="velocity">\n',
+        f"      </{kind}>\n",
+        f"      <CellData {attributes}>\n",
     ]
     for name, (values, components) in cells.items():
         parts.append(_array(name, values, components, binary, "        "))
     parts += ["      </CellData>\n", "    </Piece>\n", "  </PolyData>\n", "</VTKFile>\n"]
     return "".join(parts)
+
+
+def _force_chains(rows: Mapping[str, np.ndarray], position: np.ndarray, time, binary) -> str:
+    """A frame's contacts as VTK lines: ``body_a``'s centroid, the contact point,
+    ``body_b``'s centroid, with the rows as cell data (``export_vtk``)."""
+    a, b = np.asarray(rows["body_a"]), np.asarray(rows["body_b"])
+    n = len(a)
+    points = np.stack([position[a], rows["point"], position[b]], axis=1).reshape(-1, 2)
+    normal = np.asarray(rows["normal"], dtype=np.float64).reshape(-1, 2)
+    tangent = np.stack([-normal[:, 1], normal[:, 0]], axis=1)
+    force = np.zeros((n, 3))
+    force[:, :2] = (
+        rows["force_normal"][:, None] * normal + rows["force_tangential"][:, None] * tangent
+    )
+
+    def real(name):
+        return (np.asarray(rows[name], dtype="<f8"), 1)
+
+    cells = {
+        "force_normal": real("force_normal"),
+        "force_tangential": real("force_tangential"),
+        "force": (force, 3),
+        "slip_rate": real("slip_rate"),
+        "theta": real("theta"),
+        "mu": real("mu"),
+        "stuck": (np.asarray(rows["stuck"], dtype="<i4"), 1),
+        "body_a": (a.astype("<i8"), 1),
+        "body_b": (b.astype("<i8"), 1),
+    }
+    offsets = 3 * np.arange(n + 1)
+    return _polydata(
+        points, offsets, cells, time, binary, "Lines", 'Scalars="force_normal" Vectors="force"'
+    )
 
 
 def _collection(entries: list[tuple[float, str]]) -> str:
@@ -157,11 +209,13 @@ def export_vtk(
         run: a run file (``taichi-ice run --out``).
         folder: output folder (made if missing).
         overwrite: replace the files of an earlier export of this run in ``folder``.
-        binary: arrays as base64 (smaller, faster for ParaView); False for text.
+        binary: arrays as base64 (smaller, faster for ParaView); False for text (but an
+            array that holds a NaN, which VTK's text reader cannot read: base64).
         every: write every ``every``-th frame (1: all).
 
     Returns:
-        The ``.pvd`` collection's path.
+        The ``.pvd`` collection's path (the floes'; a run with contacts has its force chains
+        in ``STEM_contacts.pvd`` beside it).
 
     Raises:
         RunFileError: ``run`` is not a run file. UsageError: ``every`` < 1, or a run with
@@ -198,7 +252,7 @@ def export_vtk(
     kinds = np.array([int(BodyKind.from_label(str(k))) for k in bodies["kinds"]], dtype="<i4")
     index = np.arange(n, dtype="<i4")
     width = max(6, len(str(len(times) - 1)))
-    entries = []
+    entries, chains = [], []
     for f in range(0, len(times), every):
         points = floe_polygons(vertices, offsets, frames["position"][f], frames["angle"][f])
         velocity = np.zeros((n, 3))
@@ -212,5 +266,13 @@ def export_vtk(
         name = f"{stem}_{f:0{width}d}.vtp"
         _write(out / name, _polydata(points, offsets, cells, float(times[f]), binary))
         entries.append((float(times[f]), name))
+        if "contacts" in data and f < len(data["contacts"]["row_size"]):
+            rows = frame_contacts(data, f)
+            name = f"{stem}_contacts_{f:0{width}d}.vtp"
+            text = _force_chains(rows, frames["position"][f], float(times[f]), binary)
+            _write(out / name, text)
+            chains.append((float(times[f]), name))
+    if "contacts" in data:
+        _write(out / f"{stem}_contacts.pvd", _collection(chains))
     _write(pvd, _collection(entries))
     return pvd

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..codes import BodyKind
 from ..errors import UsageError
-from .runfile_read import read_run
+from .runfile_read import frame_contacts, read_run
 
 KIND_COLOURS = {
     BodyKind.DYNAMIC.label: "#9ecae1",
@@ -103,6 +103,51 @@ def draw_bodies(ax, run: dict, frame: int, view: tuple | None = None) -> None:
     ax.set_aspect("equal")
 
 
+# Force chains on the snapshots (a run with contacts): the line of a contact carrying the most
+# normal force of the frames shown is this wide (points); the others in proportion, down to
+# the thinnest.
+CHAIN_WIDTH = 3.0
+CHAIN_THINNEST = 0.2
+CHAIN_COLOUR = "#b2182b"
+
+
+def chain_scale(run: dict, frames) -> float:
+    """The largest normal force of any contact at ``frames`` (N; 0 if none): the force
+    chains of panels that share a view share it, so their widths compare."""
+    if "contacts" not in run:
+        return 0.0
+    return max(
+        (float(np.max(frame_contacts(run, f)["force_normal"], initial=0.0)) for f in frames),
+        default=0.0,
+    )
+
+
+def draw_force_chains(ax, run: dict, frame: int, scale: float | None = None) -> int:
+    """The contacts of ``frame`` as force chains on ``ax``: a line from one body's centroid
+    through the contact point to the other's, as wide as its normal force over ``scale``
+    (N; default this frame's largest, :func:`chain_scale`). A wall's or a pusher's end
+    stops at the contact point: a chain grounds there, and lines to a long wall's centroid
+    would cross the view. Returns the lines drawn (none for a run without contacts)."""
+    from matplotlib.collections import LineCollection
+
+    rows = frame_contacts(run, frame)
+    if not rows or not len(rows["body_a"]):
+        return 0
+    position = run["frames"]["position"][frame]
+    moves = np.asarray(run["bodies"]["kinds"]) == BodyKind.DYNAMIC.label
+    point = rows["point"]
+    ends = [
+        np.where(moves[rows[name]][:, None], position[rows[name]], point)
+        for name in ("body_a", "body_b")
+    ]
+    lines = np.stack([ends[0], point, ends[1]], axis=1)
+    scale = chain_scale(run, [frame]) if scale is None else scale
+    share = rows["force_normal"] / scale if scale > 0.0 else np.zeros(len(lines))
+    widths = np.maximum(CHAIN_WIDTH * share, CHAIN_THINNEST)
+    ax.add_collection(LineCollection(lines, linewidths=widths, colors=CHAIN_COLOUR, zorder=3))
+    return len(lines)
+
+
 def check_plottable(run: dict, path) -> None:
     """Raise UsageError (one line) unless the run holds a sample and a frame to draw."""
     if len(run["series"]["time"]) and len(run["frames"]["time"]):
@@ -123,13 +168,17 @@ def check_plottable(run: dict, path) -> None:
 
 def positions_figure(run: dict, snapshots: int = 6):
     """Bird's-eye snapshots at ``snapshots`` frames spread over the run, one panel each, all
-    on one view (:func:`shared_view` of the frames shown); returns the Figure."""
+    on one view (:func:`shared_view` of the frames shown), with the force chains of a run
+    that wrote its contacts (:func:`draw_force_chains`, one width scale for every panel);
+    returns the Figure."""
     n_frames = len(run["frames"]["time"])
     picks = np.unique(np.linspace(0, n_frames - 1, min(snapshots, n_frames)).round().astype(int))
     view = shared_view(run, picks)
+    scale = chain_scale(run, picks)
     fig, axes = subplots(1, len(picks), figsize=(2.4 * len(picks), 4), squeeze=False)
     for ax, f in zip(axes[0], picks):
         draw_bodies(ax, run, f, view=view)
+        draw_force_chains(ax, run, f, scale)
         ax.set_title(f"t = {run['frames']['time'][f]:.1f} s", fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
@@ -143,8 +192,9 @@ def plot_run(
 
     Figures: ``<stem>_probe_force.png`` (force magnitude on each probe body against time),
     ``<stem>_energy.png`` (every budget term and the residual), ``<stem>_positions.png``
-    (bird's-eye snapshots on one view), and with ``animate`` ``<stem>.gif`` (blocks beside
-    the probe force, every frame on one view).
+    (bird's-eye snapshots on one view, with force chains if the run wrote its contacts),
+    and with ``animate`` ``<stem>.gif`` (blocks beside the probe force, every frame on one
+    view).
 
     Raises:
         UsageError: the run holds no sample or frame yet (killed or failed before its first).
@@ -204,6 +254,7 @@ def animation_frames(run: dict):
     )
     n_frames = len(fr["time"])
     view = shared_view(run, range(n_frames))
+    scale = chain_scale(run, range(n_frames))
     fig, (ax_b, ax_f) = subplots(
         1, 2, figsize=(8, 4), gridspec_kw={"width_ratios": [1, 1.4]}, layout="constrained"
     )
@@ -211,6 +262,7 @@ def animation_frames(run: dict):
     def draw(f):
         ax_b.clear()
         draw_bodies(ax_b, run, f, view=view)
+        draw_force_chains(ax_b, run, f, scale)
         ax_b.set_title(f"t = {fr['time'][f]:.1f} s", fontsize=9)
         ax_b.set_xlabel("x (m)")
         ax_b.set_ylabel("y (m)")

@@ -266,7 +266,8 @@ class Simulation:
             until: end time (s), measured from t = 0 of the scene: a second ``run`` continues
                 from where the first stopped, to this time.
             out: run file (one scene) or one file per world (a batch); None writes nothing.
-            progress: show a progress bar on stderr.
+            progress: show progress on stderr (``progress.Progress``): "compiling kernels",
+                then a bar on a terminal or in a notebook, a line at most every 15 s elsewhere.
             overwrite: replace an existing ``out`` (the command line asks ``--overwrite``);
                 False refuses it. Two writers of one path are always refused (a lock file).
             resume: continue the run in ``out`` from its checkpoint (``out`` + ".ckpt"):

@@ -108,6 +108,20 @@ def test_on_compiled_kernels_the_rate_counts_from_the_start(monkeypatch, clock, 
     assert "5 steps/s" in lines[0] and "10 s left" in lines[0]
 
 
+def test_a_run_done_in_its_first_stride_has_no_time_left(clock, capsys):
+    """The whole run in one stride: no rate is known, and the line says 0 s left, not
+    'after the next stride'."""
+    bar = Progress(10, dt=0.1)
+    bar.compiling()
+    clock.now += 5.0
+    bar.update(10)
+    bar.close()
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2 and lines[1].endswith(
+        "100%  1.00/1.00 s simulated  -- steps/s  0 s left"
+    )
+
+
 def stride_run(bar: Progress, clock: Clock, compile_s: float, strides: int, steps: int, s: float):
     """A fake run: compiling and a first stride of ``steps`` in ``compile_s``, then
     ``strides`` more of ``steps`` steps in ``s`` each."""

@@ -166,6 +166,8 @@ class Progress:
         return "-- steps/s" if self.rate is None else f"{self.rate:,.0f} steps/s"
 
     def time_left(self) -> str:
+        if self.k >= self.total:  # a run done in its first stride has no rate, nor time left
+            return "0 s left"
         if self.rate is None:
             return "time left: after the next stride"
         return f"{duration(self.left)} left"

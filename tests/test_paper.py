@@ -210,6 +210,13 @@ def test_paper_command_writes_every_file(tmp_path, taichi_runtime, capsys):
     text = (out / "summary.md").read_text()
     assert "| mu0.9 |" in text and "rate-state" in text and "findings" in text
     assert "Which findings survive which choice" in text
+    # Each finding counts where it is true, then gives the verdict of that count (issue 33:
+    # "does not hold in 0 of 16 layouts" read as a double negative).
+    for f in summary["findings"]:
+        verdict = "it holds" if f["holds"] else "it does not hold"
+        said = f"true in {f['holds_in']} of {f['of']} {f['unit']}, so {verdict}"
+        assert said in text, said
+    assert "does not hold in" not in text
 
 
 def test_paper_command_refuses_negative_seeds(capsys):

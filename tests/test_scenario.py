@@ -342,6 +342,20 @@ def test_field_bad_input_message() -> None:
         )
 
 
+def test_an_angle_past_a_full_turn_is_refused_as_degrees() -> None:
+    """angle = 10 meant as degrees (issue 32): refused with the radians of 10 degrees, for a
+    body and a field; a full turn either way (2 pi) is still an angle."""
+    import math
+
+    message = error_of(BASE.replace("length = 0.5", "length = 0.5\nangle = 10"))
+    assert "[[body]] #1 'floe', key 'angle'" in message and "more than a full turn" in message
+    assert f"{math.radians(10):.6g}" in message
+    with pytest.raises(ScenarioError, match=r"key 'angle'.*write -0\.785398"):
+        sc.scene_from_dict(field_dict(angle=-45.0), source="ens")
+    turned = sc.scene_from_dict(field_dict(angle=-2 * math.pi))
+    assert np.allclose(turned.angles, -2 * math.pi)
+
+
 def test_field_overlap_names_blocks() -> None:
     """Blocks packed closer than their size are refused, naming both blocks and the fix."""
     with pytest.raises(ScenarioError) as info:

@@ -136,6 +136,19 @@ class Table:
             raise self.error(key, f"must not be negative, got {x:g}{unit}")
         return x
 
+    def angle(self, key: str, default: Any = REQUIRED) -> float:
+        """A number of radians; more than a full turn is refused, since it is almost always
+        degrees written where radians are meant (``angle = 10`` for 10 degrees)."""
+        x = self.number(key, default)
+        if x is not default and abs(x) > 2.0 * math.pi:
+            raise self.error(
+                key,
+                f"{x:g} rad is more than a full turn; angles are in radians: for {x:g} "
+                f"degrees write {math.radians(x):.6g}, and a turn past 2 pi as the angle less "
+                "whole turns",
+            )
+        return x
+
     def integer(self, key: str, default: Any = REQUIRED, *, minimum: int | None = None) -> int:
         v = self.get(key, default)
         if v is default and key not in self.data:

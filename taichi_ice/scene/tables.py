@@ -261,7 +261,7 @@ def parse_body(source: str, index: int, data: Any) -> Body:
     shape = t.string("shape", REQUIRED, SHAPES)
     vertices, centroid = _centred(_outline(t, shape))
     position = t.vector("position")
-    angle = t.number("angle", 0.0)
+    angle = t.angle("angle", 0.0)
     velocity = t.vector("velocity", frozen(np.zeros(2)))
     omega = t.number("omega", 0.0)
     if "force" in t and kind != BodyKind.DYNAMIC.label:
@@ -331,7 +331,7 @@ def parse_field(source: str, index: int, data: Any) -> FieldSpec | VoronoiField 
         spacing=t.vector("spacing", positive=True),
         stagger=t.number("stagger", 0.0),
         jitter=t.number("jitter", 0.0, nonnegative=True, unit=" m"),
-        angle=t.number("angle", 0.0),
+        angle=t.angle("angle", 0.0),
         velocity=t.vector("velocity", frozen(np.zeros(2))),
         omega=t.number("omega", 0.0),
         velocity_jitter=t.number("velocity_jitter", 0.0, nonnegative=True, unit=" m/s"),

@@ -204,14 +204,15 @@ def summary_markdown(summary: dict) -> str:
             )
         lines += ["", "## The paper's findings, layout by layout", ""]
         for f in summary["findings"]:
-            verdict = "holds" if f["holds"] else "does not hold"
+            verdict = "it holds" if f["holds"] else "it does not hold"
             extra = ""
             if "released_in" in f:
                 counts = ", ".join(f"{k} {v}" for k, v in f["released_in"].items())
                 extra = f" Released by the end, of {summary['seeds']} layouts: {counts}."
             lines.append(
-                f"- **{f['claim']}** ({f['measure']}): {verdict} in {f['holds_in']} of "
-                f"{f['of']} {f['unit']}.{extra}"
+                f"- **{f['claim']}** ({f['measure']}): true in {f['holds_in']} of "
+                f"{f['of']} {f['unit']}, so {verdict} (true in more than half is the "
+                f"rule).{extra}"
             )
     by_choice = summary.get("findings_by_choice") or {}
     if by_choice:

@@ -2,7 +2,7 @@
 
 The paper's pillar scene (rubble pushed past a fixed pillar) over a few layouts x Coulomb
 friction from mu = 0.1 to 0.9 x rate-and-state friction. The sweep is given as the tables of
-a sweep file (README, "Sweeps on Dask"), run batch by batch, and its results come back as an
+a sweep file (docs/sweeps.md), run batch by batch, and its results come back as an
 ``xarray.Dataset`` with one row per world: the analysis is a ``groupby``.
 
     python examples/sweep_with_xarray.py --out out/examples              # 4 layouts, 20 s

@@ -31,7 +31,7 @@ TOUCH_AREA = 1e-12
 # pyb2d3 hands back float32 values.
 FLOAT32_RTOL = 1e-6
 
-# The columns README.md and benchmarks/README.md document, which every CSV has.
+# The columns docs/performance.md and benchmarks/README.md document, which every CSV has.
 DOCUMENTED = (
     "blocks",
     "precision",

@@ -233,7 +233,7 @@ def test_two_workers_equal_one_process_and_a_killed_sweep_resumes(sweep_dir, tai
 
 
 def test_the_example_sweep_is_valid():
-    """sweeps/pillar.toml (the README's example): 7 laws x 2 area fractions x 8 layouts."""
+    """sweeps/pillar.toml (docs/sweeps.md's example): 7 laws x 2 area fractions x 8 layouts."""
     sweep = load_sweep("sweeps/pillar.toml")
     assert len(sweep.worlds()) == 112 and sweep.runs == {0}
 

@@ -539,7 +539,7 @@ def main(argv: list[str] | None = None) -> int:
         if DISPATCH_REFUSED not in str(exc):
             raise
         # Taichi launches a thread an element; Vulkan promises 65,535 workgroups a launch
-        # and lavapipe gives no more (README, On GPUs).
+        # and lavapipe gives no more (docs/performance.md, On GPUs).
         print(
             "taichi-ice: error: the GPU driver refused a kernel launch (Taichi: "
             f"{printable(str(exc).strip().splitlines()[-1])}): some drivers (lavapipe) take at "

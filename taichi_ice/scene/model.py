@@ -26,23 +26,27 @@ import numpy as np
 
 from ..codes import BodyKind
 from ..physics import polygon
+from ..physics.forcing import AIR_DENSITY, AIR_DRAG
 from ..physics.timestep import DEFAULT_SAFETY, stable_time_step
 from ..readonly import frozen
 from ..tomlio import dump_toml
 
 if TYPE_CHECKING:
     from ..physics.friction import Coulomb, RateState
+    from .grid import ForcingGrid
 
 __all__ = [
     "DEFAULT_OUTPUT_INTERVAL",
     "DEFAULT_SERIES_INTERVAL",
     "SHAPES",
     "Body",
+    "CoriolisProperties",
     "FieldSpec",
     "IceProperties",
     "Scene",
     "SimulationSettings",
     "WaterProperties",
+    "WindProperties",
 ]
 
 SHAPES = ("rectangle", "diamond", "polygon")
@@ -124,11 +128,48 @@ class WaterProperties:
         density: water density, kg/m^3.
         form_drag: form drag coefficient on the submerged frontal area, dimensionless.
         skin_drag: skin drag coefficient on the wetted plan (bottom) area, dimensionless.
+        current: the ocean current, m/s: ``(u, v)`` everywhere, a ``grid.ForcingGrid``, or
+            None (still water). The drag acts on the floe's velocity relative to it.
+        geostrophic: the current is geostrophic: the sea surface tilts to balance its
+            Coriolis force, and pushes every floe with ``m f k x u`` (needs ``current`` and
+            a ``[coriolis]`` table).
     """
 
     density: float = 1010.0
     form_drag: float = 1.0
     skin_drag: float = 0.005
+    current: tuple[float, float] | ForcingGrid | None = None
+    geostrophic: bool = False
+
+
+@dataclass(frozen=True)
+class WindProperties:
+    """The ``[wind]`` table: air drag ``rho_a C_a S |U - v| (U - v)`` on every dynamic floe
+    (``physics.forcing``).
+
+    Attributes:
+        velocity: the wind, m/s: ``(u, v)`` everywhere or a ``grid.ForcingGrid``.
+        air_density: kg/m^3 (default the standard atmosphere at sea level).
+        drag: the air-ice drag coefficient ``C_a`` on the plan area, dimensionless
+            (default Hibler's 1979 value, ``physics.forcing.AIR_DRAG``).
+    """
+
+    velocity: tuple[float, float] | ForcingGrid
+    air_density: float = AIR_DENSITY
+    drag: float = AIR_DRAG
+
+
+@dataclass(frozen=True)
+class CoriolisProperties:
+    """The ``[coriolis]`` table: the Coriolis force ``-m f k x v`` on every dynamic floe.
+
+    Attributes:
+        latitude: degrees north (negative south), or None where ``f`` was given.
+        f: the Coriolis parameter ``2 Omega sin(latitude)``, 1/s.
+    """
+
+    latitude: float | None = None
+    f: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,6 +301,7 @@ class Scene:
             enough to rebuild this exact scene.
         simulation, ice, water, friction: the tables (``water`` is ``None`` for no drag;
             ``friction`` a ``taichi_ice.physics.friction.Coulomb`` or ``RateState``).
+        wind, coriolis: the ``[wind]`` and ``[coriolis]`` tables, or None (none).
         bodies: every body: ``[[body]]`` tables in file order, then each field row by row.
         fields: the ``[[field]]`` specifications, in file order: ``FieldSpec`` (a lattice),
             ``voronoi.VoronoiField`` or ``floes.FileField``.
@@ -279,6 +321,8 @@ class Scene:
     fields: tuple[Any, ...] = ()
     raw: Mapping[str, Any] = dataclasses.field(default_factory=dict, repr=False)
     notes: tuple[str, ...] = ()
+    wind: WindProperties | None = None
+    coriolis: CoriolisProperties | None = None
 
     @property
     def n_bodies(self) -> int:

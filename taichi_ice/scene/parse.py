@@ -1,7 +1,8 @@
 """Scene files: TOML to a validated, immutable :class:`~taichi_ice.scene.model.Scene`.
 
-A scene file has the tables ``[simulation]``, ``[ice]``, ``[water]`` (optional), ``[friction]``
-(optional), and the arrays of tables ``[[body]]`` and ``[[field]]``; ``docs/scenarios.md`` is
+A scene file has the tables ``[simulation]``, ``[ice]``, ``[water]``, ``[wind]`` and
+``[coriolis]`` (optional), ``[friction]`` (optional), and the arrays of tables ``[[body]]`` and
+``[[field]]``; ``docs/scenarios.md`` is
 the user's reference for every key. Everything a run needs is checked here, before Taichi
 starts: every message names the file, the table (``[[body]] #3 'pillar'``) and the key, and
 says how to fix it.
@@ -43,21 +44,25 @@ from .model import (
     MAX_STEPS,
     SHAPES,
     Body,
+    CoriolisProperties,
     FieldSpec,
     IceProperties,
     Scene,
     SimulationSettings,
     WaterProperties,
+    WindProperties,
 )
 from .overlaps import OVERLAP_RTOL, find_overlaps
 from .table import array_of_tables, check_keys, type_name
 from .tables import (
     parse_body,
+    parse_coriolis,
     parse_field,
     parse_friction,
     parse_ice,
     parse_simulation,
     parse_water,
+    parse_wind,
 )
 
 __all__ = [
@@ -66,11 +71,13 @@ __all__ = [
     "OVERLAP_RTOL",
     "SHAPES",
     "Body",
+    "CoriolisProperties",
     "FieldSpec",
     "IceProperties",
     "Scene",
     "SimulationSettings",
     "WaterProperties",
+    "WindProperties",
     "bundled_scenes",
     "dump_toml",
     "find_overlaps",
@@ -87,7 +94,7 @@ OVERLAP_REPORT = 5
 # scenarios/ folder links there), loadable by name from any directory.
 _BUNDLED = "scenarios"
 
-_TOP_KEYS = ("simulation", "ice", "water", "friction", "body", "field")
+_TOP_KEYS = ("simulation", "ice", "water", "wind", "coriolis", "friction", "body", "field")
 
 
 # --------------------------------------------------------------------------------------------
@@ -184,6 +191,13 @@ def scene_from_dict(
     simulation = parse_simulation(source, data["simulation"])
     ice = parse_ice(source, data.get("ice", {}))
     water = parse_water(source, data["water"]) if "water" in data else None
+    wind = parse_wind(source, data["wind"]) if "wind" in data else None
+    coriolis = parse_coriolis(source, data["coriolis"]) if "coriolis" in data else None
+    if water is not None and water.geostrophic and coriolis is None:
+        raise ScenarioError(
+            f"{source}: [water], key 'geostrophic': the tilt that holds a geostrophic current "
+            "is f k x u: add a [coriolis] table (latitude or f), or remove geostrophic"
+        )
     friction = parse_friction(source, data.get("friction"))
 
     bodies: list[Body] = []
@@ -228,6 +242,8 @@ def scene_from_dict(
         fields=tuple(specs),
         raw=raw,
         notes=tuple(notes),
+        wind=wind,
+        coriolis=coriolis,
     )
     _check_mass(scene, labels)
     _check_extent(scene, labels)

@@ -16,6 +16,7 @@ import dataclasses
 import math
 import re
 from collections.abc import Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -23,19 +24,23 @@ import numpy as np
 from ..codes import BodyKind
 from ..errors import ScenarioError
 from ..physics import polygon
+from ..physics.forcing import coriolis_parameter
 from ..physics.timestep import DEFAULT_SAFETY
 from ..readonly import frozen
 from .floes import FILE_KEYS, FileField, parse_file_field
+from .grid import ForcingGrid, read_grid
 from .model import (
     DEFAULT_OUTPUT_INTERVAL,
     DEFAULT_SERIES_INTERVAL,
     MAX_VERTICES,
     SHAPES,
     Body,
+    CoriolisProperties,
     FieldSpec,
     IceProperties,
     SimulationSettings,
     WaterProperties,
+    WindProperties,
 )
 from .table import REQUIRED, Table, type_name
 from .voronoi import VORONOI_KEYS, VoronoiField, parse_voronoi
@@ -45,17 +50,21 @@ if TYPE_CHECKING:
 
 __all__ = [
     "BODY_KEYS",
+    "CORIOLIS_KEYS",
     "FIELD_KEYS",
     "FIELD_KINDS",
     "ICE_KEYS",
     "SIMULATION_KEYS",
     "WATER_KEYS",
+    "WIND_KEYS",
     "parse_body",
+    "parse_coriolis",
     "parse_field",
     "parse_friction",
     "parse_ice",
     "parse_simulation",
     "parse_water",
+    "parse_wind",
 ]
 
 # The keys of each table. The settings tables' keys are their dataclasses' fields, in order
@@ -64,6 +73,10 @@ __all__ = [
 SIMULATION_KEYS = tuple(f.name for f in dataclasses.fields(SimulationSettings))
 ICE_KEYS = tuple(f.name for f in dataclasses.fields(IceProperties))
 WATER_KEYS = tuple(f.name for f in dataclasses.fields(WaterProperties))
+WIND_KEYS = tuple(f.name for f in dataclasses.fields(WindProperties))
+CORIOLIS_KEYS = tuple(f.name for f in dataclasses.fields(CoriolisProperties))
+# The keys of a table that gives a current or wind on a grid (``grid``).
+GRID_KEYS = ("file", "u", "v")
 BODY_KEYS = (
     "name",
     "kind",
@@ -173,14 +186,78 @@ def parse_ice(source: str, data: Any) -> IceProperties:
 
 
 def parse_water(source: str, data: Any) -> WaterProperties:
-    """The ``[water]`` table, its defaults filled."""
+    """The ``[water]`` table, its defaults filled (a grid file of its current read)."""
     t = Table(source, "[water]", data, WATER_KEYS)
     d = WaterProperties()
+    current = _velocity_field(t, "current", None)
+    geostrophic = t.boolean("geostrophic", False)
+    if geostrophic and current is None:
+        raise t.error(
+            "geostrophic",
+            "a geostrophic current needs a current: add current = [u, v] (m/s) or a grid "
+            "file, or remove geostrophic",
+        )
     return WaterProperties(
         density=t.number("density", d.density, positive=True, unit=" kg/m^3"),
         form_drag=t.number("form_drag", d.form_drag, nonnegative=True),
         skin_drag=t.number("skin_drag", d.skin_drag, nonnegative=True),
+        current=current,
+        geostrophic=geostrophic,
     )
+
+
+def parse_wind(source: str, data: Any) -> WindProperties:
+    """The ``[wind]`` table, its defaults filled (a grid file of its velocity read)."""
+    t = Table(source, "[wind]", data, WIND_KEYS)
+    return WindProperties(
+        velocity=_velocity_field(t, "velocity", REQUIRED),
+        air_density=t.number(
+            "air_density", WindProperties.air_density, positive=True, unit=" kg/m^3"
+        ),
+        drag=t.number("drag", WindProperties.drag, nonnegative=True),
+    )
+
+
+def parse_coriolis(source: str, data: Any) -> CoriolisProperties:
+    """The ``[coriolis]`` table: ``latitude`` (degrees) or ``f`` (1/s), one of the two."""
+    t = Table(source, "[coriolis]", data, CORIOLIS_KEYS)
+    if ("latitude" in t) == ("f" in t):
+        raise ScenarioError(
+            f"{source}: [coriolis]: give latitude (degrees north, e.g. 75.0) or f (the "
+            "Coriolis parameter in 1/s, e.g. 1.4e-4), one of the two"
+        )
+    if "f" in t:
+        return CoriolisProperties(f=t.number("f"))
+    latitude = t.number("latitude")
+    if not -90.0 <= latitude <= 90.0:
+        raise t.error(
+            "latitude", f"must be in [-90, 90] degrees (north positive), got {latitude:g}"
+        )
+    return CoriolisProperties(latitude=latitude, f=coriolis_parameter(latitude))
+
+
+def _velocity_field(t: Table, key: str, default: Any) -> tuple[float, float] | ForcingGrid | None:
+    """A current or wind: ``[u, v]`` (m/s) everywhere, or a table ``{file, u, v}`` naming a
+    netCDF grid (``grid.read_grid``; a relative path is read from the scene file's folder)."""
+    v = t.get(key, default)
+    if v is None:
+        return None
+    if isinstance(v, Mapping):
+        sub = Table(t.source, f"{t.label} {key}", v, GRID_KEYS)
+        name = sub.string("file")
+        path = Path(name).expanduser()
+        if not path.is_absolute():
+            here = Path(t.source)
+            path = (here.parent if here.is_file() else Path.cwd()) / path
+        return read_grid(path, sub.string("u", "u"), sub.string("v", "v"), sub.error)
+    if not isinstance(v, (list, tuple, np.ndarray)):
+        raise t.error(
+            key,
+            f'expected [u, v] in m/s or a grid file {{file = "{key}.nc", u = "u", v = "v"}}, '
+            f"got {type_name(v)}",
+        )
+    u, w = t.vector(key)
+    return (float(u), float(w))
 
 
 # --------------------------------------------------------------------------------------------

@@ -58,8 +58,8 @@ class ThetaMethod(_Labelled):
 class EnergyTerm(_Labelled):
     """Columns of a world's energy table (J); see ``taichi_ice.run.budget``.
 
-    The first four accumulate over a run; ``KINETIC`` and ``ELASTIC`` are what the world
-    holds now.
+    ``KINETIC`` and ``ELASTIC`` are what the world holds now; every other term accumulates
+    over a run.
     """
 
     FRICTION = 0  # dissipated by frictional slip (the paper's Figure 6)
@@ -70,6 +70,10 @@ class EnergyTerm(_Labelled):
     ELASTIC = 5  # elastic energy in overlaps and tangential springs
     CRUSHING = 6  # dissipated by crushing: overlap beyond the ice's strength, not recovered
     SEVERED = 7  # held by contacts (overlap and stick spring) when they ended (see BodyEnergy)
+    # Work done on the floes by the forcing (see BodyEnergy): 0 in a scene without it.
+    WIND = 8  # by the wind's drag
+    CURRENT = 9  # by the current, through the water drag (the drag's power on the current)
+    TILT = 10  # by the sea-surface tilt of a geostrophic current
 
 
 class BodyEnergy(_Labelled):
@@ -88,6 +92,12 @@ class BodyEnergy(_Labelled):
     # size does not change; a spring that stiffened while stretched gives back more than it
     # took (negative).
     SEVERED = 5
+    # The forcing's work on this body (kept only where a scene has a current or wind:
+    # ``schema.Layout.forced``). The water drag on a floe at v in a current u does F.v =
+    # F.u + F.(v - u): the current's work F.u, and -F.(v - u) >= 0 dissipated (DRAG).
+    WIND = 6  # F_air.v, the wind's drag
+    CURRENT = 7  # F_water.u
+    TILT = 8  # m f (k x u).v, the sea-surface tilt of a geostrophic current
 
 
 class RestRule(_Labelled):

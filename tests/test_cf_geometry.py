@@ -144,7 +144,7 @@ def test_the_file_follows_the_cf_geometry_rules(floes):
                 assert "geometry" not in ds[name].attrs, name
     with h5py.File(path, "r") as f:
         assert f.attrs["Conventions"] == "CF-1.8"
-        assert f.attrs["format_version"] == "2.1"
+        assert f.attrs["format_version"] == "2.2"
 
 
 def as_format_2_0(path: Path, old: Path) -> None:

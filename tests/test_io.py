@@ -30,6 +30,9 @@ SERIES = {
     "crushing_energy",
     "severed_energy",
     "work_in",
+    "wind_work",
+    "current_work",
+    "tilt_work",
     "n_contacts",
 }
 FRAMES = {"time", "position", "angle", "velocity", "omega"}

@@ -146,12 +146,15 @@ def _run_scene(args, scene, out: str) -> int:
     e = sim.energies()
     probe = result.series[0]["probe_force"]
     peak = float(np.max(np.linalg.norm(probe, axis=-1))) if probe.size else 0.0
-    scale = max(abs(e["work_in"]), e["kinetic_energy"] + e["friction_energy"], 1e-300)
+    from ..run.budget import WORK
+
+    work = sum(e[k] for k in WORK)  # of kinematic bodies, external forces and the forcing
+    scale = max(abs(work), e["kinetic_energy"] + e["friction_energy"], 1e-300)
     print(
         f"wrote {out}: {result.steps} steps in {result.wall_time:.1f} s "
         f"({result.steps / max(result.wall_time, 1e-9):.0f} steps/s); "
         f"peak probe force {peak / 1e3:.3g} kN; friction {e['friction_energy']:.4g} J; "
-        f"work in {e['work_in']:.4g} J; budget residual {e['residual']:.3g} J "
+        f"work in {work:.4g} J; budget residual {e['residual']:.3g} J "
         f"({100 * e['residual'] / scale:.2f} %)"
         + (f"; WARNING: {result.warning}" if result.warning else "")
     )

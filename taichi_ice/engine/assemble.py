@@ -13,6 +13,7 @@ NumPy halves of their ``_ti`` twins).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -23,6 +24,8 @@ from ..codes import BodyKind, ThetaMethod
 from ..errors import ScenarioError
 from ..physics import polygon
 from ..physics.drag import drag_coefficients
+from ..physics.forcing import air_drag_coefficient
+from ..scene.grid import ForcingGrid
 from ..scene.model import MAX_VERTICES
 from .options import DEFAULT_SMALL_SLOTS, LARGE_SLOTS, Options
 from .schema import SCAN, HostArrays, Layout
@@ -64,6 +67,7 @@ CAPACITY_FLOORS = {
     "n_probes": 4,
     "n_small": 8,
     "n_large": 4,
+    "grid_nodes": 1,
 }
 # Outline matrices the contact kernels unroll: a body of 3 vertices runs in the kernels of 4.
 MAX_VERTS_STEPS = (4, 8, MAX_VERTICES)
@@ -143,10 +147,13 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     """Check that ``scenes`` can run as one batch and build its arrays.
 
     Args:
-        scenes: the worlds. They must share the water table (present or not), whether the
-            ice has a crushing strength, and the integrator of theta (laws that have one);
-            the friction laws (Coulomb, rate-and-state and its variants), their parameters,
-            the ice's values (stiffness, viscosity, strength, ...) and everything else may
+        scenes: the worlds. They must share the water table (present or not; a uniform
+            current may differ, its presence may not, a gridded one is one grid), the wind
+            and Coriolis tables' presence (and a gridded wind's grid), whether the ice has a
+            crushing strength, and the integrator of theta (laws that have one); the
+            friction laws (Coulomb, rate-and-state and its variants), their parameters, the
+            ice's values (stiffness, viscosity, strength, ...), a uniform current or wind,
+            the air's density and drag, the Coriolis parameter and everything else may
             differ.
         options: the engine's settings (``options.Options``; default ``Options()``). Read
             here: ``dt`` and ``force_dt`` (``Options.time_step``), ``precision`` (None:
@@ -179,6 +186,7 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     cell_size = sizes.pop("cell_size")
     skin = SKIN_FRACTION * cell_size
     arrays.update(_contact_values(scenes))
+    forcing = _forcing(scenes, arrays, sizes)
     arrays["grid_inv_cell"] = np.array(1.0 / (cell_size + skin))
     arrays["list_skin"] = np.array(skin)
     arrays["body_count"] = np.array(sizes["n_bodies"], dtype=np.int32)
@@ -198,6 +206,7 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
         precision=options.precision or "f64",
         energy=options.energy,
         integrator=options.integrator,
+        **forcing,
     )
     caps = capacities(sizes)
     layout = real.replace(**caps, hash_size=hash_size_for(caps["n_small"]))
@@ -206,6 +215,8 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     if not layout.water:
         arrays.pop("body_drag_linear")
         arrays.pop("body_drag_rotational")
+    if not layout.wind:
+        arrays.pop("body_drag_air")
     host = HostArrays(real, arrays)
     return Batch(scenes, layout, real, host, dt, stable_dt, default_slots)
 
@@ -227,8 +238,22 @@ def _check_shared(scenes: tuple) -> None:
                 f"{where} whether the ice has a crushing_strength ([ice]); the kernels compile "
                 "the cap in or not, so all worlds of a batch have one or none"
             )
-        if s.water != first.water:
-            raise ValueError(f"{where} the [water] table; all worlds of a batch share it")
+        if _shared_water(s.water) != _shared_water(first.water):
+            raise ValueError(
+                f"{where} the [water] table; all worlds of a batch share it (but the value "
+                "of a uniform current, which they may each have: not its presence)"
+            )
+        if _field_kind(s.wind, "velocity") != _field_kind(first.wind, "velocity"):
+            raise ValueError(
+                f"{where} its [wind] (present or not, uniform or on which grid); the kernels "
+                "compile it in or not, so all worlds of a batch have one (uniform values, air "
+                "density and drag may differ) or none"
+            )
+        if (s.coriolis is None) != (first.coriolis is None):
+            raise ValueError(
+                f"{where} whether it has a [coriolis] table; the kernels compile the force in "
+                "or not, so all worlds of a batch have one (f may differ) or none"
+            )
     # The laws may mix (Coulomb, rate-and-state and its variants, any parameters); the
     # integrator of theta is compiled in, so the laws that have one must agree on it.
     methods = [(w, s) for w, s in enumerate(scenes) if hasattr(s.friction, "method")]
@@ -240,6 +265,65 @@ def _check_shared(scenes: tuple) -> None:
                 f"rate-and-state integrator ({s.friction.method} against "
                 f"{s0.friction.method}); the kernels compile one"
             )
+
+
+def _field_kind(table, key: str):
+    """What a batch shares of a current or wind: None, "uniform", or the grid itself."""
+    value = None if table is None else getattr(table, key)
+    if value is None or isinstance(value, ForcingGrid):
+        return value
+    return "uniform"
+
+
+def _shared_water(water):
+    """The [water] table as the worlds of a batch must share it."""
+    if water is None:
+        return None
+    return dataclasses.replace(water, current=_field_kind(water, "current"))
+
+
+def _forcing(scenes: tuple, arrays: dict, sizes: dict) -> dict:
+    """The forcing's per-world arrays and grids into ``arrays``, ``grid_nodes`` into
+    ``sizes``; returns the layout's switches (``Layout.current`` ...)."""
+    first = scenes[0]
+    current = _field_kind(first.water, "current")
+    wind = _field_kind(first.wind, "velocity")
+    switches = {
+        "current": current is not None,
+        "wind": wind is not None,
+        "coriolis": first.coriolis is not None,
+        "tilt": current is not None and first.water.geostrophic,
+        "current_grid": isinstance(current, ForcingGrid),
+        "wind_grid": isinstance(wind, ForcingGrid),
+    }
+    if current == "uniform":
+        arrays["world_current"] = np.array([s.water.current for s in scenes], dtype=float)
+    if wind == "uniform":
+        arrays["world_wind"] = np.array([s.wind.velocity for s in scenes], dtype=float)
+    if switches["coriolis"]:
+        arrays["world_coriolis"] = np.array([s.coriolis.f for s in scenes], dtype=float)
+    # Row 0 of the grid tables is the current's, row 1 the wind's (``forcing.Forcing``); a
+    # row without a grid is never read.
+    values, start = [], 0
+    origin, spacing = np.zeros((2, 3)), np.ones((2, 3))
+    size = np.array([[1, 1, 1, 0]] * 2, dtype=np.int32)
+    for row, grid in enumerate((current, wind)):
+        if isinstance(grid, ForcingGrid):
+            nt, ny, nx = grid.shape
+            values.append(grid.values.reshape(-1, 2))
+            origin[row], spacing[row] = grid.origin, grid.spacing
+            size[row] = (nx, ny, nt, start)
+            start += nt * ny * nx
+    sizes["grid_nodes"] = start
+    switches["clock"] = bool(np.any(size[:, 2] > 1))
+    if values:
+        arrays.update(
+            grid_values=np.concatenate(values),
+            grid_origin=origin,
+            grid_spacing=spacing,
+            grid_size=size,
+        )
+    return switches
 
 
 def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
@@ -256,6 +340,7 @@ def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
             "body_force_ext",
             "body_drag_linear",
             "body_drag_rotational",
+            "body_drag_air",
             "body_probe",
             "body_pos",
             "body_angle",
@@ -294,6 +379,11 @@ def _bodies(scenes: tuple) -> tuple[dict[str, np.ndarray], dict]:
                 )
             rows["body_drag_linear"].append(c_lin)
             rows["body_drag_rotational"].append(c_rot)
+            c_air = 0.0
+            if s.wind is not None:
+                area = masses[i] / (s.ice.density * s.ice.thickness)
+                c_air = air_drag_coefficient(area, s.wind.air_density, s.wind.drag)
+            rows["body_drag_air"].append(c_air)
             rows["body_probe"].append(n_probe if b.probe else -1)
             n_probe += int(b.probe)
             rows["body_pos"].append(b.position)

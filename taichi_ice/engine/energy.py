@@ -1,8 +1,10 @@
 """The energy stage: every world's energy table, from the per-body and per-contact terms.
 
-    work_in = kinetic + elastic + friction + viscous + drag + crushing + residual   (``budget``)
+    work_in + wind + current + tilt
+        = kinetic + elastic + friction + viscous + drag + crushing + severed + residual
 
-``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
+(``budget``). ``work_in`` is the work of kinematic bodies and external forces; ``wind``,
+``current`` and ``tilt`` that of the forcing (0 without it); ``friction`` the slip work
 of contacts (the paper's Figure 6), ``viscous`` the contact dashpots, ``drag`` the water;
 ``crushing`` the work on overlap beyond the ice's strength; ``elastic`` what the contacts
 hold now: the work of their elastic forces, normal (``integral k_e A v_n dt``) and
@@ -85,6 +87,12 @@ class EnergyMeter(Stage):
                 row[EnergyTerm.WORK_IN] += d.body_energy[i, BodyEnergy.WORK]
                 row[EnergyTerm.CRUSHING] += d.body_energy[i, BodyEnergy.CRUSHING]
                 row[EnergyTerm.SEVERED] += d.body_energy[i, BodyEnergy.SEVERED]
+                if ti.static(self.layout.wind):
+                    row[EnergyTerm.WIND] += d.body_energy[i, BodyEnergy.WIND]
+                if ti.static(self.layout.current):
+                    row[EnergyTerm.CURRENT] += d.body_energy[i, BodyEnergy.CURRENT]
+                if ti.static(self.layout.tilt):
+                    row[EnergyTerm.TILT] += d.body_energy[i, BodyEnergy.TILT]
         if ti.static(not self.layout.energy):  # no budget kept: only the kinetic term known
             for k in ti.static(range(N_TERMS)):
                 if ti.static(k != EnergyTerm.KINETIC):

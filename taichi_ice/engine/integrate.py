@@ -10,7 +10,13 @@ step F and their position impulse as a force G = 2 Q / dt^2 (``physics.contact_s
 
 F_other the external force and the water drag (taken at the step's middle); likewise for the
 angle. Fixed bodies never move; kinematic bodies move at their own
-velocity and do work on whatever they push. Work and dissipation of the step are evaluated
+velocity and do work on whatever they push.
+
+Where a scene has them (``physics.forcing``, compiled in only then): the water drag acts on
+the velocity relative to the current, the wind's drag joins the other forces (both taken
+where the water drag is), the sea-surface tilt of a geostrophic current adds ``f k x u``, and
+Coriolis turns the velocity by the trapezoidal rule (``forcing.coriolis_step``: at the step's
+mean velocity, so that it does no work). Work and dissipation of the step are evaluated
 with the mid-step velocity, which is the exact power of a force held constant over the step,
 so kinetic energy and work agree to round-off and the energy residual measures only the
 time discretisation of the contact forces.
@@ -28,10 +34,25 @@ import taichi as ti
 
 from ..codes import BodyEnergy, BodyKind, Status
 from ..physics.drag_ti import water_drag_ti
+from ..physics.forcing_ti import air_drag_ti, coriolis_step_ti, tilt_acceleration_ti
 from ..physics.polygon_ti import rotation_ti
+from .forcing import Forcing
 from .schema import FORCE_QUANTUM, Layout
 from .stages import Access, Stage
 from .state import Data, Model, quantum_dtype
+
+# What the step reads of the forcing: its values, its grids and the body's clock.
+FORCING_READS = (
+    "body_drag_air",
+    "body_time",
+    "world_current",
+    "world_wind",
+    "world_coriolis",
+    "grid_values",
+    "grid_origin",
+    "grid_spacing",
+    "grid_size",
+)
 
 
 @ti.data_oriented
@@ -50,6 +71,8 @@ class Integrator(Stage):
                 "body_drag_rotational",
                 "body_inv_mass",
                 "body_inv_inertia",
+                # The forcing (``forcing.Forcing``)
+                *FORCING_READS,
                 # Data in
                 "time_step",
                 "body_force_q",
@@ -91,14 +114,17 @@ class Integrator(Stage):
                 "world_nbr_stale",
                 "nbr_rebuild",
                 "nbr_path",
+                "body_time",
             ),
         ),
         "orient": Access(reads=("body_count", "body_angle"), writes=("body_rot",)),
     }
+    PARTS: ClassVar[dict[str, type]] = {"forcing": Forcing}
 
     def __init__(self, layout: Layout, model: Model, data: Data, neighbours):
         self.layout, self.model, self.data = layout, model, data
         self.neighbours = neighbours
+        self.forcing = Forcing(layout, model, data)
 
     @ti.kernel
     def orient(self):
@@ -193,33 +219,80 @@ class Integrator(Stage):
                 f_ext = m.body_force_ext[i]
             f_drag = ti.Vector([0.0, 0.0], self.layout.real)
             t_drag = ti.cast(0.0, self.layout.real)
+            # Euler: at the step's start; analytic: at the middle of the step the other
+            # forces make (second order).
+            vd, wd = v0, w0
+            if ti.static(self.layout.analytic):
+                vd = v0 + 0.5 * dt * m.body_inv_mass[i] * (f + f_ext)
+                wd = w0 + 0.5 * dt * m.body_inv_inertia[i] * tau
+            # The water's velocity relative to which the floe feels its drag: the current.
+            u_w = ti.Vector([0.0, 0.0], self.layout.real)
+            if ti.static(self.layout.current):
+                u_w = self.forcing.current(i)
             if ti.static(self.layout.water):
-                # Euler: at the step's start; analytic: at the middle of the step the other
-                # forces make (second order).
-                vd, wd = v0, w0
-                if ti.static(self.layout.analytic):
-                    vd = v0 + 0.5 * dt * m.body_inv_mass[i] * (f + f_ext)
-                    wd = w0 + 0.5 * dt * m.body_inv_inertia[i] * tau
+                vr = vd
+                if ti.static(self.layout.current):
+                    vr = vd - u_w
                 f_drag, t_drag = water_drag_ti(
-                    vd, wd, m.body_drag_linear[i], m.body_drag_rotational[i]
+                    vr, wd, m.body_drag_linear[i], m.body_drag_rotational[i]
                 )
-            v1 = v0 + dt * m.body_inv_mass[i] * (f + f_ext + f_drag)
+            f_all = f + f_ext + f_drag
+            f_air = ti.Vector([0.0, 0.0], self.layout.real)
+            if ti.static(self.layout.wind):
+                f_air = air_drag_ti(vd, self.forcing.wind(i), m.body_drag_air[i])
+                f_all = f_all + f_air
+            v1 = v0 + dt * m.body_inv_mass[i] * f_all
+            a_tilt = ti.Vector([0.0, 0.0], self.layout.real)
+            if ti.static(self.layout.coriolis):
+                cor = m.world_coriolis[m.body_world[i]]
+                if ti.static(self.layout.tilt):
+                    a_tilt = tilt_acceleration_ti(cor, u_w)
+                v1 = coriolis_step_ti(v0, m.body_inv_mass[i] * f_all + a_tilt, cor, dt)
             w1 = w0 + dt * m.body_inv_inertia[i] * (tau + t_drag)
             shift = dt * v1
             turn = dt * w1
             if ti.static(self.layout.analytic):
                 # x(t + dt) = x + dt v + dt^2 / (2 m) (2 Q / dt^2 + the other forces)
-                shift = dt * v0 + 0.5 * dt * dt * m.body_inv_mass[i] * (g + f_ext + f_drag)
+                f_pos = g + f_ext + f_drag
+                if ti.static(self.layout.wind):
+                    f_pos = f_pos + f_air
+                shift = dt * v0 + 0.5 * dt * dt * m.body_inv_mass[i] * f_pos
+                if ti.static(self.layout.coriolis):
+                    # The tilt, and Coriolis at the step's mean velocity, as v1 had them.
+                    vc = 0.5 * (v0 + v1)
+                    a_cor = m.world_coriolis[m.body_world[i]] * ti.Vector([vc[1], -vc[0]])
+                    shift = shift + 0.5 * dt * dt * (a_tilt + a_cor)
                 turn = dt * w0 + 0.5 * dt * dt * m.body_inv_inertia[i] * (gam + t_drag)
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
             if ti.static(self.layout.energy):
+                # The drag dissipates its power on the velocity relative to the water; the
+                # rest of its power on the floe, F.u, is the current's work. Coriolis does
+                # none (perpendicular to vm); the wind and the tilt do F.vm.
+                vr = vm
+                if ti.static(self.layout.current):
+                    vr = vm - u_w
                 e_d = d.body_energy[i, BodyEnergy.DRAG]
                 d.body_energy[i, BodyEnergy.DRAG] = e_d + ti.cast(
-                    -(f_drag.dot(vm) + t_drag * wm) * dt, ti.f64
+                    -(f_drag.dot(vr) + t_drag * wm) * dt, ti.f64
                 )
                 if ti.static(self.layout.force_ext):
                     e_w = d.body_energy[i, BodyEnergy.WORK]
                     d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
+                if ti.static(self.layout.current):
+                    e_c = d.body_energy[i, BodyEnergy.CURRENT]
+                    d.body_energy[i, BodyEnergy.CURRENT] = e_c + ti.cast(
+                        f_drag.dot(u_w) * dt, ti.f64
+                    )
+                if ti.static(self.layout.wind):
+                    e_a = d.body_energy[i, BodyEnergy.WIND]
+                    d.body_energy[i, BodyEnergy.WIND] = e_a + ti.cast(f_air.dot(vm) * dt, ti.f64)
+                if ti.static(self.layout.tilt):  # m f (k x u).vm
+                    e_t = d.body_energy[i, BodyEnergy.TILT]
+                    d.body_energy[i, BodyEnergy.TILT] = e_t + ti.cast(
+                        a_tilt.dot(vm) * dt / m.body_inv_mass[i], ti.f64
+                    )
+            if ti.static(self.layout.clock):
+                d.body_time[i] = d.body_time[i] + ti.cast(dt, ti.f64)
             if ti.static(self.layout.velocity_changes):  # what the contacts use next step
                 d.body_dvel[i] = v1 - v0
                 d.body_domega[i] = w1 - w0

@@ -8,8 +8,9 @@ a time, in float64, from the same equations:
   module, with what a contact carries from step to step, ``ContactMemory``).
 - :func:`reference_step`: every owned pair of every world, forces gathered in the same
   fixed point as the kernels (``schema.FORCE_QUANTUM``, truncated toward zero), then
-  semi-implicit Euler with water drag (``drag.water_drag``) and external forces; fixed
-  bodies stay, kinematic ones move at their velocity. Contact memory (``xi``, last area,
+  semi-implicit Euler with water drag (``drag.water_drag``), external forces and the
+  forcing (current, wind, Coriolis and tilt: ``forcing``); fixed bodies stay, kinematic ones
+  move at their velocity. Contact memory (``xi``, last area,
   stored elastic energy, ``theta``) is a dict keyed by the ordered pair ``(owner, partner)``
   and dropped when the pair no longer overlaps.
 - :func:`reference_energies`: the energy terms of each world, as ``World.energies``.
@@ -30,6 +31,7 @@ import numpy as np
 
 from ..codes import BodyEnergy, BodyKind, EnergyTerm, ThetaMethod
 from ..physics.drag import water_drag
+from ..physics.forcing import air_drag, coriolis_step, grid_sample, tilt_acceleration
 from ..physics.friction import CONTACT_ROW
 from ..physics.slip import NEWTON_TOLERANCE
 from .assemble import Batch, assemble
@@ -77,6 +79,12 @@ class ReferenceModel:
         tol: Newton's tolerance of the sliding rate.
         quantum: force resolution of the gather (N); None sums in floating point.
         integrator: "euler" or "analytic" (``options.INTEGRATORS``).
+        current, wind: ``(W, 2)`` uniform current and wind (m/s), or None.
+        current_grid, wind_grid: ``(values, origin, spacing)`` of a gridded one
+            (``forcing.grid_sample``), or None.
+        c_air: ``(N,)`` wind drag coefficients (kg/m), or None without wind.
+        coriolis: ``(W,)`` Coriolis parameters (1/s), or None. tilt: the current is
+            geostrophic (its sea-surface tilt pushes the floes).
     """
 
     kind: np.ndarray
@@ -96,10 +104,25 @@ class ReferenceModel:
     crushing_force: np.ndarray | None = None
     tol: float = NEWTON_TOLERANCE["f64"]
     integrator: str = "euler"
+    current: np.ndarray | None = None
+    current_grid: tuple | None = None
+    wind: np.ndarray | None = None
+    wind_grid: tuple | None = None
+    c_air: np.ndarray | None = None
+    coriolis: np.ndarray | None = None
+    tilt: bool = False
 
     @property
     def n_bodies(self) -> int:
         return len(self.kind)
+
+    def current_at(self, i: int, pos, t: float) -> np.ndarray:
+        """The current at body i's centroid ``pos`` at time ``t`` (m/s)."""
+        return _field_at(self.current, self.current_grid, int(self.world[i]), pos, t)
+
+    def wind_at(self, i: int, pos, t: float) -> np.ndarray:
+        """The wind at body i's centroid ``pos`` at time ``t`` (m/s)."""
+        return _field_at(self.wind, self.wind_grid, int(self.world[i]), pos, t)
 
     def inv_mass(self, i: int) -> float:
         """``1 / m`` of body i (1/kg), 0 unless it is dynamic."""
@@ -141,12 +164,34 @@ class ReferenceModel:
             crushing_force=host.world_crushing_force if layout.crushing else None,
             tol=NEWTON_TOLERANCE[layout.precision],
             integrator=layout.integrator,
+            current=host.world_current if layout.current_uniform else None,
+            current_grid=_grid(host, 0) if layout.current_grid else None,
+            wind=host.world_wind if layout.wind_uniform else None,
+            wind_grid=_grid(host, 1) if layout.wind_grid else None,
+            c_air=host.body_drag_air if layout.wind else None,
+            coriolis=host.world_coriolis if layout.coriolis else None,
+            tilt=layout.tilt,
         )
 
     @classmethod
     def from_scenes(cls, scenes: Sequence, quantum: float | None = FORCE_QUANTUM):
         """The model of ``World(scenes)`` (``assemble`` then :meth:`from_batch`)."""
         return cls.from_batch(assemble(scenes), quantum)
+
+
+def _grid(host, row: int) -> tuple:
+    """``(values (nt, ny, nx, 2), origin, spacing)`` of row ``row`` of the batch's grids."""
+    nx, ny, nt, start = (int(n) for n in host.grid_size[row])
+    values = host.grid_values[start : start + nt * ny * nx].reshape(nt, ny, nx, 2)
+    return values, host.grid_origin[row], host.grid_spacing[row]
+
+
+def _field_at(uniform, grid, w: int, pos, t: float) -> np.ndarray:
+    if grid is not None:
+        return grid_sample(*grid, float(pos[0]), float(pos[1]), t)
+    if uniform is not None:
+        return np.asarray(uniform[w], dtype=np.float64)
+    return np.zeros(2)
 
 
 @dataclass
@@ -158,7 +203,8 @@ class ReferenceState:
         contacts: ``{(owner, partner): ContactMemory}`` of the contacts of the last step.
         dvel: ``(N, 2)`` m/s, domega: ``(N,)`` rad/s: each body's velocity change over its
             last step (zero before the first).
-        body_energy: ``(N, 5)`` cumulative terms per body (J), ``codes.BodyEnergy`` columns.
+        body_energy: ``(N, len(BodyEnergy))`` cumulative terms per body (J),
+            ``codes.BodyEnergy`` columns.
         time: s.
     """
 
@@ -321,25 +367,46 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             v0, w0 = state.vel[i], float(state.omega[i])
             f_ext = model.force_ext[i]
             f_drag, t_drag = np.zeros(2), 0.0
+            vd, wd = v0, w0  # analytic: mid-step, as the others leave it
+            if analytic:
+                vd = v0 + 0.5 * dt * (1.0 / model.mass[i]) * (f + f_ext)
+                wd = w0 + 0.5 * dt * (1.0 / model.inertia[i]) * tau
+            u_w = model.current_at(i, state.pos[i], state.time)
             if model.drag is not None:
-                vd, wd = v0, w0  # analytic: mid-step, as the others leave it
-                if analytic:
-                    vd = v0 + 0.5 * dt * (1.0 / model.mass[i]) * (f + f_ext)
-                    wd = w0 + 0.5 * dt * (1.0 / model.inertia[i]) * tau
                 fd, td = water_drag(
-                    vd[None, :], np.array([wd]), model.drag[i, 0:1], model.drag[i, 1:2]
+                    (vd - u_w)[None, :], np.array([wd]), model.drag[i, 0:1], model.drag[i, 1:2]
                 )
                 f_drag, t_drag = fd[0], float(td[0])
-            v1 = v0 + dt * (1.0 / model.mass[i]) * (f + f_ext + f_drag)
+            f_all = f + f_ext + f_drag
+            f_air = np.zeros(2)
+            if model.c_air is not None:
+                f_air = air_drag(vd, model.wind_at(i, state.pos[i], state.time), model.c_air[i])
+                f_all = f_all + f_air
+            v1 = v0 + dt * (1.0 / model.mass[i]) * f_all
+            a_tilt, a_cor = np.zeros(2), np.zeros(2)
+            if model.coriolis is not None:
+                cor = float(model.coriolis[model.world[i]])
+                if model.tilt:
+                    a_tilt = tilt_acceleration(cor, u_w)
+                v1 = coriolis_step(v0, (1.0 / model.mass[i]) * f_all + a_tilt, cor, dt)
+                vc = 0.5 * (v0 + v1)
+                a_cor = cor * np.array([vc[1], -vc[0]])
             w1 = w0 + dt * (1.0 / model.inertia[i]) * (tau + t_drag)
             shift, turn = dt * v1, dt * w1
             if analytic:
                 g, gam = summed(shift_sum, turn_sum, i)
-                shift = dt * v0 + 0.5 * dt * dt * (1.0 / model.mass[i]) * (g + f_ext + f_drag)
+                f_pos = g + f_ext + f_drag + f_air
+                shift = dt * v0 + 0.5 * dt * dt * (1.0 / model.mass[i]) * f_pos
+                shift = shift + 0.5 * dt * dt * (a_tilt + a_cor)
                 turn = dt * w0 + 0.5 * dt * dt * (1.0 / model.inertia[i]) * (gam + t_drag)
             vm, wm = 0.5 * (v0 + v1), 0.5 * (w0 + w1)
-            new.body_energy[i, BodyEnergy.DRAG] += -(float(f_drag @ vm) + t_drag * wm) * dt
+            # The drag dissipates on the velocity relative to the water; its power on the
+            # current is the current's work (``integrate.Integrator.body``).
+            new.body_energy[i, BodyEnergy.DRAG] += -(float(f_drag @ (vm - u_w)) + t_drag * wm) * dt
             new.body_energy[i, BodyEnergy.WORK] += float(f_ext @ vm) * dt
+            new.body_energy[i, BodyEnergy.CURRENT] += float(f_drag @ u_w) * dt
+            new.body_energy[i, BodyEnergy.WIND] += float(f_air @ vm) * dt
+            new.body_energy[i, BodyEnergy.TILT] += float(a_tilt @ vm) * dt / model.inv_mass(i)
             new.dvel[i] = v1 - v0
             new.domega[i] = w1 - w0
             new.vel[i] = v1
@@ -372,6 +439,9 @@ def reference_energies(state: ReferenceState, model: ReferenceModel) -> np.ndarr
         out[w, EnergyTerm.WORK_IN] += state.body_energy[i, BodyEnergy.WORK]
         out[w, EnergyTerm.CRUSHING] += state.body_energy[i, BodyEnergy.CRUSHING]
         out[w, EnergyTerm.SEVERED] += state.body_energy[i, BodyEnergy.SEVERED]
+        out[w, EnergyTerm.WIND] += state.body_energy[i, BodyEnergy.WIND]
+        out[w, EnergyTerm.CURRENT] += state.body_energy[i, BodyEnergy.CURRENT]
+        out[w, EnergyTerm.TILT] += state.body_energy[i, BodyEnergy.TILT]
     for (i, _j), mem in state.contacts.items():
         out[model.world[i], EnergyTerm.ELASTIC] += mem.elastic
     return out

@@ -27,6 +27,7 @@ slots      K, contact slots per body
 hash_size  H, buckets of the spatial hash (a power of two)
 scan_blocks H / SCAN, blocks of the hash's two-level prefix sum
 nbr_len    C, entries of a body's neighbour list (candidate partners it owns)
+grid_nodes nodes of the gridded current and wind together (1 where there is none)
 ========== ===============================================================================
 
 plus the lengths of the code tables (``energy_terms``, ``body_energy_terms``,
@@ -205,6 +206,15 @@ MODEL: tuple[Var, ...] = (
     Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, when="force_ext", init=HOST),
     Var("body_drag_linear", "real", ("n_bodies",), "kg/m", "quadratic water drag on translation", when="water", init=HOST),
     Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation", when="water", init=HOST),
+    # The forcing (physics.forcing): uniform per world, or sampled from the batch's grids.
+    Var("body_drag_air", "real", ("n_bodies",), "kg/m", "quadratic wind drag rho_a C_a S ([wind])", when="wind", init=HOST),
+    Var("world_current", "real", ("n_worlds",), "m/s", "uniform ocean current ([water] current)", lanes=2, when="current_uniform", init=HOST),
+    Var("world_wind", "real", ("n_worlds",), "m/s", "uniform wind ([wind] velocity)", lanes=2, when="wind_uniform", init=HOST),
+    Var("world_coriolis", "real", ("n_worlds",), "1/s", "Coriolis parameter f ([coriolis])", when="coriolis", init=HOST),
+    Var("grid_values", "real", ("grid_nodes",), "m/s", "the gridded current's nodes, then the wind's: t major, x fastest", lanes=2, when="gridded", init=HOST),
+    Var("grid_origin", "f64", (2, 3), "m, m, s", "x, y and t of the first node of the current's grid (row 0) and the wind's (row 1)", when="gridded", init=HOST),
+    Var("grid_spacing", "f64", (2, 3), "m, m, s", "node spacing along x, y and t of each grid", when="gridded", init=HOST),
+    Var("grid_size", "i32", (2, 4), "", "nodes along x, y and t of each grid, and its first node in grid_values", when="gridded", init=HOST),
     Var("body_probe", "i32", ("n_bodies",), "id", "probe index of the body, -1 if none", init=HOST),
     Var("vert_local", "real", ("n_local_verts",), "m", "distinct outlines relative to the centroid, unrotated", lanes=2, init=HOST),
     Var("vert_normal_local", "real", ("n_local_verts",), "", "outward unit normal of the edge from each vertex of vert_local to the next, unrotated", lanes=2, init=HOST),
@@ -238,6 +248,7 @@ DATA: tuple[Var, ...] = (
     Var("body_domega", "real", ("n_bodies",), "rad/s", "angular velocity change of the body's last step", when="velocity_changes"),
     Var("body_shift_q", "i64", ("n_bodies",), "N / FORCE_QUANTUM", "analytic step: the contacts' position impulses 2 Q / dt^2 gathered this step, fixed point (as body_force_q)", lanes=2, when="analytic"),
     Var("body_turn_q", "i64", ("n_bodies",), "N m / FORCE_QUANTUM", "analytic step: their torque, fixed point", when="analytic"),
+    Var("body_time", "f64", ("n_bodies",), "s", "time of a dynamic body's next step: the clock of a grid with a t axis", when="clock"),
     Var("contact_partner", "i32", ("n_bodies", "slots"), "id", "partner body of each slot, -1 if empty", init=-1),
     Var("contact_count", "i32", ("n_bodies",), "", "used slots of each body"),
     Var("contact_xi", "real", ("n_bodies", "slots"), "m", "tangential spring stretch along the tangent"),
@@ -337,6 +348,14 @@ class Layout:
         nbr_len: entries of a body's neighbour list.
         integrator: how the step moves the bodies, "euler" or "analytic"
             (``options.INTEGRATORS``).
+        current, wind, coriolis: an ocean current (``[water] current``), the wind's drag
+            (``[wind]``), the Coriolis force (``[coriolis]``) are compiled in; without them
+            the step is what it was before they existed, bit for bit.
+        tilt: the sea-surface tilt of a geostrophic current (``[water] geostrophic``).
+        current_grid, wind_grid: the current or the wind is sampled from a grid
+            (``grid_values``), not uniform per world (``world_current``, ``world_wind``).
+        clock: a grid has a t axis: each dynamic body keeps its time (``body_time``).
+        grid_nodes: capacity of ``grid_values``, both grids' nodes together.
     """
 
     n_bodies: int
@@ -358,6 +377,35 @@ class Layout:
     force_ext: bool = True
     nbr_len: int = 1
     integrator: str = "euler"
+    current: bool = False
+    wind: bool = False
+    coriolis: bool = False
+    tilt: bool = False
+    current_grid: bool = False
+    wind_grid: bool = False
+    clock: bool = False
+    grid_nodes: int = 1
+
+    @property
+    def current_uniform(self) -> bool:
+        """A current of one value per world (``world_current``)."""
+        return self.current and not self.current_grid
+
+    @property
+    def wind_uniform(self) -> bool:
+        """A wind of one value per world (``world_wind``)."""
+        return self.wind and not self.wind_grid
+
+    @property
+    def gridded(self) -> bool:
+        """The current or the wind comes from a grid (``grid_values``)."""
+        return self.current_grid or self.wind_grid
+
+    @property
+    def forced(self) -> bool:
+        """The forcing does work that the budget books (``codes.BodyEnergy.WIND`` ...):
+        a current (and its tilt) or wind. Coriolis does none."""
+        return self.current or self.wind
 
     @property
     def analytic(self) -> bool:
@@ -384,7 +432,8 @@ class Layout:
             "world_edges": self.n_worlds + 1,
             "scan_blocks": (self.hash_size + SCAN - 1) // SCAN,
             "energy_terms": len(EnergyTerm),
-            "body_energy_terms": len(BodyEnergy),
+            # The forcing's columns only where it does work.
+            "body_energy_terms": len(BodyEnergy) if self.forced else int(BodyEnergy.WIND),
             "status_len": len(Status),
         }
         if symbol in derived:

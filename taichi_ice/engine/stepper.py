@@ -31,7 +31,7 @@ from ..errors import BackendError
 from .broadphase import NeighbourList
 from .contact import ContactStage
 from .energy import EnergyMeter
-from .integrate import Integrator
+from .integrate import FORCING_READS, Integrator
 from .schema import Layout, contact_columns, law_columns
 from .stages import Access, Stage
 from .state import Data, Model
@@ -53,6 +53,7 @@ class WorldStepper(Stage):
                 "body_domega",
                 "body_drag_linear",
                 "body_drag_rotational",
+                *FORCING_READS,
                 "body_dvel",
                 "body_energy",
                 "body_force_ext",
@@ -130,6 +131,7 @@ class WorldStepper(Stage):
                 "status",
                 "world_nbr_stale",
                 "nbr_rebuild",
+                "body_time",
             ),
             per_contact=ContactStage.ACCESS["compute"].per_contact,
         )

@@ -1,21 +1,25 @@
 """The energy budget of a world: its terms, the energy that came in, and the residual.
 
-    came_in  = (kinetic + elastic)(0) + work_in
+    came_in  = (kinetic + elastic)(0) + work_in + wind_work + current_work + tilt_work
     residual = came_in - (kinetic + elastic + friction + viscous + drag + crushing + severed)
 
-``work_in`` is the work of kinematic bodies and external forces; ``friction`` the slip work
-of contacts (the paper's Figure 6), ``viscous`` the contact dashpots (and the stick spring's
-backward-Euler step, a dashpot of ``k_t dt / 2``: ``contact_law.contact_work``), ``drag`` the
-water, ``crushing`` the overlap beyond the ice's strength (0 unless
-``[ice] crushing_strength``), ``severed`` the elastic energy contacts still held when they
-ended (the normal force follows the overlap's area and the stick spring's stiffness the
-contact width, neither a potential, so floes that slide apart take work along that no force
-gives back; it can be negative; ``codes.BodyEnergy.SEVERED``); ``kinetic`` and ``elastic``
-are what the world holds now (the overlaps and the tangential springs). The contacts book
-their work at the velocity the bodies move with over the step, so the residual is the time
-discretisation error of the explicit step alone: it shrinks with dt, faster than first
-order (docs/accuracy.md). A divergence is judged without the elastic term (``created``,
-``breached``), and the whole residual at the end of a run.
+``work_in`` is the work of kinematic bodies and external forces; ``wind_work``,
+``current_work`` and ``tilt_work`` that of the forcing (``physics.forcing``: the wind's
+drag, the current through the water drag, ``F_water . u``, and the sea-surface tilt of a
+geostrophic current; 0 in a scene without them, and in files written before them; Coriolis
+does no work); ``friction`` the slip work of contacts (the paper's Figure 6), ``viscous``
+the contact dashpots (and the stick spring's backward-Euler step, a dashpot of
+``k_t dt / 2``: ``contact_law.contact_work``), ``drag`` the water (the drag's power on the
+floe's velocity relative to the current), ``crushing`` the overlap beyond the ice's
+strength (0 unless ``[ice] crushing_strength``), ``severed`` the elastic energy contacts
+still held when they ended (the normal force follows the overlap's area and the stick
+spring's stiffness the contact width, neither a potential, so floes that slide apart take
+work along that no force gives back; it can be negative; ``codes.BodyEnergy.SEVERED``);
+``kinetic`` and ``elastic`` are what the world holds now (the overlaps and the tangential
+springs). The contacts book their work at the velocity the bodies move with over the step,
+so the residual is the time discretisation error of the explicit step alone: it shrinks
+with dt, faster than first order (docs/accuracy.md). A divergence is judged without the
+elastic term (``created``, ``breached``), and the whole residual at the end of a run.
 
 The terms are ``codes.EnergyTerm`` columns in the kernels' energy table and named series
 (``SERIES``) in run files and results. Plain NumPy: the engine, the plots, the ensemble
@@ -31,10 +35,19 @@ import numpy as np
 
 from ..codes import EnergyTerm
 
+# The forcing's terms: work done on the floes (``<label>_work``).
+_FORCING = (EnergyTerm.WIND, EnergyTerm.CURRENT, EnergyTerm.TILT)
 # Series name of each term, in EnergyTerm order (the /series datasets of a run file).
 SERIES: tuple[str, ...] = tuple(
-    "work_in" if t == EnergyTerm.WORK_IN else f"{t.label}_energy" for t in EnergyTerm
+    "work_in"
+    if t == EnergyTerm.WORK_IN
+    else f"{t.label}_work"
+    if t in _FORCING
+    else f"{t.label}_energy"
+    for t in EnergyTerm
 )
+# The work done on a world: by kinematic bodies and external forces, and by the forcing.
+WORK = ("work_in", "wind_work", "current_work", "tilt_work")
 # The terms that hold energy now and the ones that accumulate its losses.
 HELD = ("kinetic_energy", "elastic_energy")
 DISSIPATED = (
@@ -71,7 +84,7 @@ def as_series(table: np.ndarray) -> dict[str, np.ndarray]:
 
 def _initial(terms: Mapping[str, Any]) -> dict[str, Any]:
     # The first sample of each series: a run's budget starts at t = 0.
-    # (Files written before the crushing or severed term have none: it was 0 or not kept.)
+    # (Files written before the crushing, severed or forcing terms have none: they were 0.)
     return {k: np.asarray(terms.get(k, 0.0)).reshape(-1)[0] for k in SERIES}
 
 
@@ -83,7 +96,10 @@ def came_in(terms: Mapping[str, Any], initial: Mapping[str, Any] | None = None):
         initial: the terms at t = 0; default the first entry of each array in ``terms``.
     """
     initial = _initial(terms) if initial is None else initial
-    return initial["kinetic_energy"] + initial["elastic_energy"] + np.asarray(terms["work_in"])
+    out = initial["kinetic_energy"] + initial["elastic_energy"] + np.asarray(terms["work_in"])
+    for name in WORK[1:]:  # the forcing's: 0 without it, absent from files before it
+        out = out + np.asarray(terms.get(name, 0.0))
+    return out
 
 
 def residual(terms: Mapping[str, Any], initial: Mapping[str, Any] | None = None):
@@ -140,6 +156,7 @@ __all__ = [
     "DISSIPATED",
     "HELD",
     "SERIES",
+    "WORK",
     "as_series",
     "breached",
     "came_in",

@@ -14,8 +14,9 @@ declaration (``taichi_ice.engine.schema``) as fields come and go:
   same steps as in a run that was never stopped;
 - ``/host/initial_energy``: the energy table at t = 0 (the budget's starting capital);
 - attributes: ``steps``, ``time``, ``dt``, ``precision``, ``n_samples`` and ``n_frames``
-  (rows of each run file written when it was taken, JSON lists), ``scenarios`` and
-  ``frictions`` (JSON lists: a resume must be the same run), ``run_ids`` (the ``run_id`` of
+  (rows of each run file written when it was taken, JSON lists), ``scenarios``,
+  ``frictions`` and ``grids`` (the digests of the scenes' current and wind grid files) (JSON
+  lists: a resume must be the same run), ``run_ids`` (the ``run_id`` of
   each run file, JSON list: a resume must continue the same files), ``format_version`` and
   ``written`` (UTC);
 - ``digest``: SHA-256 of every array and attribute above (``written`` aside). HDF5 keeps no
@@ -39,7 +40,7 @@ from ..errors import OutputError, RunFileError
 from ..scene.table import printable
 from .runfile_read import DAMAGE
 
-FORMAT_VERSION = "9"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "10"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
 #                       5: a body's rotation (body_rot) instead of its turned outline;
@@ -47,6 +48,7 @@ FORMAT_VERSION = "9"  # 2: contact memory single-buffered (no buffer axis, no co
 #                       7: a digest of everything in it (damage is refused, not restored)
 #                       8: the integrator (euler or analytic), whose state differs
 #                       9: fields at the layout's capacities (assemble.capacity)
+#                       10: the forcing's energy columns and clock (body_time)
 SUFFIX = ".ckpt"
 
 
@@ -68,7 +70,18 @@ def identity(sim) -> dict:
         "dt": float(sim.dt),
         "precision": sim.precision,
         "integrator": sim.options.integrator,
+        # A scene's text names its grid files, not what they held: their digests.
+        "grids": [_grid_digests(s) for s in sim.scenes],
     }
+
+
+def _grid_digests(scene) -> list[str]:
+    """SHA-256 of the current's and the wind's grid of ``scene`` (those it has)."""
+    fields = (
+        scene.water.current if scene.water is not None else None,
+        scene.wind.velocity if scene.wind is not None else None,
+    )
+    return [f.digest for f in fields if hasattr(f, "digest")]
 
 
 def write(sim, path: str | Path, n_samples, n_frames, run_ids=None) -> Path:
@@ -118,6 +131,7 @@ def _write(sim, tmp: Path, arrays: dict, run_ids, n_samples, n_frames) -> None:
         f.attrs["integrator"] = ident["integrator"]
         f.attrs["scenarios"] = json.dumps(ident["scenarios"])
         f.attrs["frictions"] = json.dumps(ident["frictions"])
+        f.attrs["grids"] = json.dumps(ident["grids"])
         f.attrs["n_samples"] = json.dumps([int(n) for n in n_samples])
         f.attrs["n_frames"] = json.dumps([int(n) for n in n_frames])
         if run_ids is not None:
@@ -179,7 +193,7 @@ def read(path: str | Path) -> dict:
                 "with them); start anew with --overwrite"
             )
     # (Another format is refused by ``restore``, naming the versions.)
-    for key in ("scenarios", "frictions", "n_samples", "n_frames", "run_ids"):
+    for key in ("scenarios", "frictions", "grids", "n_samples", "n_frames", "run_ids"):
         if key == "run_ids" and key not in out["attrs"]:
             continue  # written before run ids: the rows are still checked
         try:
@@ -211,6 +225,7 @@ def restore(sim, ckpt: dict, where: str | Path) -> None:
     for key, now, then in (
         ("friction law", ident["frictions"], a["frictions"]),
         ("scene", ident["scenarios"], a["scenarios"]),
+        ("forcing grid files' contents", ident["grids"], a["grids"]),
         ("dt", ident["dt"], float(a["dt"])),
         ("precision", ident["precision"], a["precision"]),
         ("integrator", ident["integrator"], a["integrator"]),

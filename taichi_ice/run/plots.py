@@ -199,7 +199,7 @@ def plot_run(
     Raises:
         UsageError: the run holds no sample or frame yet (killed or failed before its first).
     """
-    from .budget import DISSIPATED, HELD, residual
+    from .budget import DISSIPATED, HELD, WORK, residual
 
     path = Path(path)
     out = Path(out_dir) if out_dir else path.parent
@@ -223,8 +223,9 @@ def plot_run(
     written.append(save_figure(fig, out / f"{path.stem}_probe_force.png"))
 
     fig, ax = subplots(figsize=(7, 4))
-    for name in ("work_in", *HELD, *DISSIPATED):
-        if name in s and (name != "crushing_energy" or np.any(s[name])):  # crushing: if any
+    sometimes = ("crushing_energy", *WORK[1:])  # crushing and the forcing's work: if any
+    for name in (*WORK, *HELD, *DISSIPATED):
+        if name in s and (name not in sometimes or np.any(s[name])):
             ax.plot(t, s[name], label=name.replace("_", " "))
     ax.plot(t, residual(s), "k--", label="residual")
     ax.set_xlabel("time (s)")

@@ -18,7 +18,8 @@ Layout (one file per world; DESIGN.md section 3):
 - ``/series/``: ``time`` (T,), ``probe_force`` (T, P, 2) mean contact force on each probe
   body over the sample interval (N), ``friction_energy``, ``viscous_energy``,
   ``drag_energy``, ``kinetic_energy``, ``elastic_energy``, ``crushing_energy``,
-  ``severed_energy``, ``work_in`` (T,) in J, and ``n_contacts`` (T,).
+  ``severed_energy``, ``work_in``, ``wind_work``, ``current_work``, ``tilt_work`` (T,) in J
+  (the last three from format 2.2 on), and ``n_contacts`` (T,).
 - ``/frames/``: ``time`` (F,), ``position`` (F, N, 2), ``angle`` (F, N), ``velocity``
   (F, N, 2), ``omega`` (F, N); every body in scene order.
 - ``/bodies/``: ``names``, ``kinds``, ``vertices`` (V, 2) centroid-relative outlines and
@@ -92,7 +93,9 @@ __all__ = [
 # floes as CF geometries in /bodies (added only: every reader reads 2.0 files as before).
 # /contacts, written only when asked, is an optional group of 2.1: its presence says it, and
 # a file without it is the file of before, attribute for attribute.
-FORMAT_VERSION = "2.1"
+# 2.2: the forcing's work series, wind_work, current_work and tilt_work (added only: a file
+# without them had none, and the budget reads them as 0).
+FORMAT_VERSION = "2.2"
 CONVENTIONS = "CF-1.8"
 
 # (units, long_name) of every variable; "" units for strings (CF gives them none).
@@ -105,6 +108,9 @@ _ENERGY_NAMES = {
     "elastic_energy": "elastic energy in overlaps and tangential springs",
     "crushing_energy": "energy dissipated by crushing beyond the ice strength (cumulative)",
     "severed_energy": "work held by stick springs when their contacts ended (cumulative)",
+    "wind_work": "work done by the wind's drag (cumulative)",
+    "current_work": "work done by the ocean current through the water drag (cumulative)",
+    "tilt_work": "work done by the sea-surface tilt of a geostrophic current (cumulative)",
 }
 VARIABLES: dict[str, dict[str, tuple[str, str]]] = {
     "": {

@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -73,9 +74,9 @@ class ForcingGrid:
         """``(nt, ny, nx)``."""
         return tuple(int(n) for n in self.values.shape[:3])
 
-    @property
+    @cached_property
     def digest(self) -> str:
-        """SHA-256 of the nodes and the values."""
+        """SHA-256 of the nodes and the values (once: batches compare their worlds' grids)."""
         h = hashlib.sha256(np.asarray(self.origin + self.spacing, dtype=np.float64).tobytes())
         h.update(np.asarray(self.shape, dtype=np.int64).tobytes())
         h.update(np.ascontiguousarray(self.values).tobytes())

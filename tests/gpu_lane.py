@@ -21,7 +21,9 @@ What the lane holds and why (the CPU suite runs all of it too):
 - ``test_friction.py``, ``test_slip.py``: the laws' kernels against their twins and closed
   forms;
 - ``test_engine.py``, ``test_budget.py``: stepping, conservation, the energy budget;
-- ``test_resume.py`` (float64): checkpoints and resume, bit for bit on the same arch.
+- ``test_resume.py`` (float64): checkpoints and resume, bit for bit on the same arch;
+- ``test_forcing.py``: current, wind, Coriolis and tilt in the step against closed forms, a
+  root finder and their NumPy twins, gridded against uniform bit for bit.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ LANE = {
         "tests/test_engine.py",
         "tests/test_budget.py",
         "tests/test_resume.py",
+        "tests/test_forcing.py",
     ],
     "f32": [
         "tests/test_gpu.py",
@@ -54,6 +57,7 @@ LANE = {
         "tests/test_contact_step.py",
         "tests/test_friction.py",
         "tests/test_engine.py",
+        "tests/test_forcing.py",
     ],
 }
 

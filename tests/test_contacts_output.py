@@ -27,6 +27,7 @@ import h5py
 import numpy as np
 import pytest
 import shapely
+from jam_bodies import jam_bodies
 
 from taichi_ice import Simulation, load_scenario
 from taichi_ice.commands.cli import main
@@ -83,46 +84,7 @@ def jam_dict(law: str, push: float = 0.2) -> dict:
         duration=UNTIL, dt=DT, output_interval=OUTPUT_INTERVAL, series_interval=DT
     )
     raw["friction"] = {"law": law, **({"mu": MU} if law == "coulomb" else {})}
-    square = {"shape": "rectangle", "width": 1.0, "length": 1.0}
-    raw["body"] = [
-        {
-            "name": "floor",
-            "kind": "fixed",
-            "shape": "rectangle",
-            "width": 6.0,
-            "length": 0.5,
-            "position": [1.0, -0.25],
-            "probe": True,
-        },
-        {
-            "name": "wall",
-            "kind": "fixed",
-            "shape": "rectangle",
-            "width": 0.5,
-            "length": 2.0,
-            "position": [1.752, 1.0],
-            "probe": True,
-        },
-        {
-            "name": "pusher",
-            "kind": "kinematic",
-            "shape": "rectangle",
-            "width": 0.5,
-            "length": 0.9,
-            "position": [-1.752, 0.5],
-            "velocity": [push, 0.0],
-            "probe": True,
-        },
-    ] + [
-        {
-            "name": f"block{i}",
-            **square,
-            "position": [i * 1.001, 0.501],
-            "angle": 0.001 * i,
-            "force": [0.0, -2e5],
-        }
-        for i in range(-1, 2)
-    ]
+    raw["body"] = jam_bodies(push=push, tilt=0.001, probe_pusher=True)
     return raw
 
 

@@ -11,6 +11,7 @@ import json
 import h5py
 import numpy as np
 import pytest
+from jam_bodies import jam_bodies
 
 from taichi_ice import Simulation, load_scenario
 from taichi_ice.commands.cli import main
@@ -34,39 +35,7 @@ def jam():
     raw = copy.deepcopy(dict(load_scenario("scenarios/two_squares.toml").raw))
     raw["simulation"].update(duration=UNTIL, output_interval=0.05, series_interval=0.01)
     raw["friction"] = {"law": "rate-state"}
-    square = {"shape": "rectangle", "width": 1.0, "length": 1.0}
-    raw["body"] = [
-        {
-            "name": "floor",
-            "kind": "fixed",
-            "shape": "rectangle",
-            "width": 6.0,
-            "length": 0.5,
-            "position": [1.0, -0.25],
-            "probe": True,
-        },
-        {
-            "name": "wall",
-            "kind": "fixed",
-            "shape": "rectangle",
-            "width": 0.5,
-            "length": 2.0,
-            "position": [1.752, 1.0],
-            "probe": True,
-        },
-        {
-            "name": "pusher",
-            "kind": "kinematic",
-            "shape": "rectangle",
-            "width": 0.5,
-            "length": 0.9,
-            "position": [-1.752, 0.5],
-            "velocity": [0.02, 0.0],
-        },
-    ] + [
-        {"name": f"block{i}", **square, "position": [i * 1.001, 0.501], "force": [0.0, -2e5]}
-        for i in range(-1, 2)
-    ]
+    raw["body"] = jam_bodies(push=0.02)
     return scene_from_dict(raw, source="jam")
 
 

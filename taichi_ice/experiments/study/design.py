@@ -26,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ...physics.timestep import DEFAULT_SAFETY
+from ..metrics import METRICS as RUN_METRICS
 
 __all__ = ["Arm", "design", "stratum_seeds"]
 
@@ -50,22 +51,9 @@ CONTROL = 0.70
 SEED_BLOCK = 100_000
 STEP_SAFETY = DEFAULT_SAFETY / 2.0  # half the default step
 STRENGTHS = (1e6, 3e6)  # Pa: [ice] crushing_strength
-# What each world keeps (experiments.metrics.METRICS).
-METRICS = (
-    "peak_force",
-    "mean_force",
-    "friction_energy",
-    "crushing_energy",
-    "concentration",
-    "final_force",
-    "released",
-    "release_time",
-    "release_observed",
-    "jammed_fraction",
-    "jammed_fraction_5kN",
-    "jammed_fraction_20kN",
-    "residual_rel",
-)
+# What each world keeps: every run metric (experiments.metrics.METRICS) but the time of
+# first contact and the budget's absolute residual (its relative one is kept).
+METRICS = tuple(m for m in RUN_METRICS if m not in ("first_contact", "residual"))
 
 
 def stratum_seeds(fraction: float, n: int) -> list[int]:

@@ -6,10 +6,10 @@ from __future__ import annotations
 from ..experiments.study.design import DEFAULT_LAYOUTS
 
 EXAMPLES = """examples:
-  taichi-ice study --out out/study                       # the smallest study (~3 min on 2 cores)
-  taichi-ice study --out out/study --layouts 64          # issue 31's study (~40 min on 2 cores)
+  taichi-ice study --out out/study               # 2 layouts a stratum: 128 worlds, minutes
+  taichi-ice study --out out/study --layouts 64  # issue 31's: 2,560 worlds, ~1 h on 2 cores
   taichi-ice study --out out/study --layouts 200 --scheduler tcp://10.0.0.1:8786
-  taichi-ice study --out /tmp/smoke --until 0.5          # a smoke run
+  taichi-ice study --out /tmp/smoke --until 0.5  # a smoke run
 Run it again with the same --out to resume, or with more --layouts to grow it. The arms:
 the strata 0.85 and 0.775 (--layouts each), the control 0.70, the half step on 0.85 and
 the ice strengths 1 and 3 MPa on both strata (each --layouts / 2 unless given; 0 drops an

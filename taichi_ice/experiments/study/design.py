@@ -144,5 +144,5 @@ def design(
 
 
 # Layouts per jamming stratum of ``taichi-ice study`` without --layouts: a smoke-sized run
-# (128 worlds, about 3 minutes on 2 cores); issue 31's study is --layouts 64.
+# (128 worlds, a few minutes on 2 cores); issue 31's study is --layouts 64.
 DEFAULT_LAYOUTS = 2

@@ -1,6 +1,6 @@
 """The old public name of the polygon functions: a re-export of ``polygon`` and ``polygon_ti``.
 
-README and the docs show ``taichi_ice.geometry.overlap``; that name keeps working here. The
+Code written against ``taichi_ice.geometry.overlap`` keeps working: the name is here. The
 functions live in ``polygon`` (NumPy only: importing it starts no Taichi) and their Taichi
 twins in ``polygon_ti``; code inside ``taichi_ice`` imports those two, never this module
 (importing it loads Taichi, through ``polygon_ti``).

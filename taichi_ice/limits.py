@@ -15,7 +15,7 @@ from .errors import SizeError
 # Bytes per body of a run, scene and engine together. Measured with /proc/self/statm on the
 # 2-core VM, a field of 50,000 diamonds, float64: 0.8 kB per body for the scene (Body objects
 # and their arrays), 2.4 kB more once Simulation has assembled the host arrays and allocated
-# the Taichi fields (README: 1.35 kB of them); rounded up for the copies made on the way.
+# the Taichi fields (1.35 kB of them, measured then); rounded up for the copies made on the way.
 BYTES_PER_BODY = 4096
 # Body ids are 32-bit integers in the kernels.
 MAX_BODIES = 2**31 - 1

@@ -49,7 +49,7 @@ MAX_STEPS_PER_FRAME = 2**31 - 1
 
 # A run whose energy budget misses by more than this fraction of the energy that came in is
 # marked with a warning (file attribute ``warning``, ``RunResult.warning``, the summary line).
-# The landed scenes close within 8 % (README); a body 1e12 m out missed by 33 %.
+# The landed scenes closed within 8 % when this was set; a body 1e12 m out missed by 33 %.
 RESIDUAL_WARNING = 0.1
 
 

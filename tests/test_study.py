@@ -237,6 +237,13 @@ def test_report_writes_json_markdown_netcdf_and_figures(summary):
 
     out, s = summary
     results = synthetic_results()
+    assert all(set(d) == {label for label, _ in MODELS} for d in s["described"].values())
+    # Steady state at the pusher's 0.1 m/s: mu0 + (A - B) ln(0.1 / v_star); memory only
+    # (B = A) stays at mu0.
+    assert s["effective_mu"]["memory-only"] == pytest.approx(0.872)
+    assert s["effective_mu"]["rate-state"] == pytest.approx(
+        0.872 + (0.05 - 0.112) * np.log(0.1 / 1e-5)
+    )
     rows = s["per_world"]
     assert len(rows) == sum(int(ds.sizes["world"]) for _, ds, _ in results.values())
     for name, (arm, ds, _) in results.items():
@@ -258,6 +265,8 @@ def test_report_writes_json_markdown_netcdf_and_figures(summary):
     for name in ("study_phase_map", "study_release", "study_distributions", "study_step_bias"):
         assert (out / "figures" / f"{name}.png").stat().st_size > 20_000
     md = (out / "study.md").read_text()
+    # Each arm's throughput from its sweep log: 1,000 world-steps in 10 s.
+    assert "| af0.85 | stratum | 0.85 | 16 (0-15) | default | no strength | 10 | 100 |" in md
     assert "## The paper's claims, tested (no strength)" in md and "carried by" in md
     assert "## The step's bias: half-step-af0.85 against af0.85" in md
     json.dumps(s, allow_nan=True)

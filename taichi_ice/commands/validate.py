@@ -3,10 +3,11 @@
 
 ``taichi-ice validate`` runs them together (``experiments.validation.validate_command``);
 this runs one: ``stability``, ``single_interface``, ``dem_contact``, ``dem_accuracy``,
-``contact_convergence`` or ``speed_accuracy`` (which writes the stability chart first). The
-studies' code is in ``taichi_ice.experiments.validation``; their options are here, where
-argparse lives. ``dem_accuracy`` and ``speed_accuracy`` run each precision in a child process
-started through this module (``--worker``, hidden).
+``dem_ensemble``, ``contact_convergence``, ``contact_coupling`` or ``speed_accuracy`` (which
+writes the stability chart first). The studies' code is in
+``taichi_ice.experiments.validation``; their options are here, where argparse lives.
+``dem_accuracy`` and ``speed_accuracy`` run each precision in a child process started through
+this module (``--worker``, hidden).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ STUDIES = (
     "dem_accuracy",
     "dem_ensemble",
     "contact_convergence",
+    "contact_coupling",
     "speed_accuracy",
 )
 # What --quick makes shorter, by study.
@@ -33,6 +35,7 @@ QUICK = {
     "dem_accuracy": "small sizes (tests)",
     "dem_ensemble": "two layouts, 3 s, Euler only",
     "contact_convergence": "fewer steps and layouts",
+    "contact_coupling": "two steps (0.2 and 0.8 stable_dt)",
     "speed_accuracy": "fewer steps, 1e4 interfaces",
 }
 

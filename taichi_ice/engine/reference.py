@@ -24,7 +24,7 @@ it starts no Taichi.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -85,6 +85,9 @@ class ReferenceModel:
         c_air: ``(N,)`` wind drag coefficients (kg/m), or None without wind.
         coriolis: ``(W,)`` Coriolis parameters (1/s), or None. tilt: the current is
             geostrophic (its sea-surface tilt pushes the floes).
+        impulses: the analytic step's pair solve, None for the kernel's
+            (``reference_contact.contact_force``'s ``impulses``): a candidate step is
+            measured by swapping it here (``validation.contact_coupling``).
     """
 
     kind: np.ndarray
@@ -111,6 +114,7 @@ class ReferenceModel:
     c_air: np.ndarray | None = None
     coriolis: np.ndarray | None = None
     tilt: bool = False
+    impulses: Callable | None = None
 
     @property
     def n_bodies(self) -> int:
@@ -343,6 +347,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 else float(model.crushing_force[w]),
                 tol=model.tol,
                 analytic=analytic,
+                impulses=model.impulses,
             )
             if c is None:
                 continue  # no overlap: the pair's memory is dropped

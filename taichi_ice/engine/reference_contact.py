@@ -146,6 +146,7 @@ def contact_force(
     crushing_force: float | None = None,
     tol: float = NEWTON_TOLERANCE["f64"],
     analytic: bool = False,
+    impulses=None,
 ) -> ContactForce | None:
     """NumPy reference of ``ContactStage.pair``: the contact between an owner and a partner.
 
@@ -177,6 +178,12 @@ def contact_force(
         analytic: the analytic step (``physics.contact_step``): the normal and the stuck
             tangential spring-dashpot solved over the step, the pair's other forces told
             from ``dvel``, ``domega`` and the memory's ``force``.
+        impulses: the analytic step's solve of the pair over the step, in place of
+            ``contact_step.pair_impulses`` (a candidate measured against it, e.g.
+            ``validation.contact_coupling.coupled_impulses``): called with the same
+            arguments, ``k_nt``, the cross term of the pair's inverse mass between the
+            normal and the tangent (1/kg), and ``mu``, the friction it is likely to slide at
+            (Coulomb's, or rate and state's ``mu0``). None: ``pair_impulses``, as the kernel.
 
     Returns:
         A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
@@ -231,7 +238,16 @@ def contact_force(
         )
         exact = width > 0.0 and inv_n > 0.0 and inv_t > 0.0
     if exact:
-        f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = pair_impulses(
+        solve, extra = pair_impulses, {}
+        if impulses is not None:
+            solve = impulses
+            # The cross term, and the friction the step is likely to slide at: the Coulomb
+            # mu, or the rate-and-state law's mu0 (its mu is solved only after this).
+            extra = {
+                "k_nt": inv_inertia[0] * ci_n * ci_t + inv_inertia[1] * cj_n * cj_t,
+                "mu": float(law) if isinstance(law, (int, float)) else law.contact_row()["mu0"],
+            }
+        f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = solve(
             max(area - crushed, 0.0) / width,
             approach,
             slip,
@@ -247,6 +263,7 @@ def contact_force(
             c_t,
             inv_n,
             inv_t,
+            **extra,
         )
         if crushing_force is not None and f_n > cap_n:
             scale = cap_n / f_n

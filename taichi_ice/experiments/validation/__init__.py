@@ -23,6 +23,9 @@
   slider's frictional work and slip starts, a block that slid holding or sliding under a
   pull, steady sliding on a moving floor against mu_ss, every law in the pillar scene before
   runs part; and what the tangential stiffness and the steady-state law's t_c change.
+- ``contact_coupling``: a candidate for issue 30's step, measured in the NumPy twin: a
+  contact's normal and tangent solved as one system over the step, against the analytic
+  step's two solves apart, on the collisions against their ODE.
 """
 
 from __future__ import annotations

@@ -1,0 +1,298 @@
+"""A candidate for issue 30's second-order step: a contact's normal and tangent solved together.
+
+The analytic step (``physics.contact_step``) solves each contact's normal spring-dashpot and
+its stuck tangential one as two damped oscillators, each at the pair's inverse mass along its
+own direction (``K_nn``, ``K_tt``), and takes what moves one direction through the other (the
+bodies' turning: ``K_nt = (r_i x n)(r_i x t) / I_i + (r_j x n)(r_j x t) / I_j``) from the
+last step's forces. An offset collision (``dem_scenes.collision(0.3)``) shows what that costs:
+without friction its restitution is 2e-5 off the ODE at every step (no tangential spring, no
+cross term to lag), with friction 2.1 % at 0.8 stable_dt (issue 30's target: 1.5 %), growing
+as the step squared above 0.2.
+
+The candidate, :func:`coupled_impulses`, solves the pair's two coordinates as one linear
+system over the step: ``x = (depth, stretch)``, ``u = x' = (approach, slip)``,
+
+    u' = a - W g,   g = S x + C u,   W = [[K_nn, -K_nt], [-K_nt, K_tt]],
+
+``S = diag(k_n, k_t)``, ``C = diag(c_n, c_t)``, ``g`` the normal force and the stuck
+tangential force against the stretch, ``a`` the other forces' acceleration of the two (the
+last step's change less all of this contact's own, cross term included), by the matrix
+exponential of the affine system (SciPy's ``expm``). The impulse and position impulse the
+bodies take follow from the solution as in ``contact_step.spring_dashpot``: ``P = W^-1 (u0 +
+a h - u(h))``, ``Q = W^-1 (x0 + u0 h + a h^2 / 2 - x(h))``; a contact that began inside the
+last step is integrated from its onset. Where the normal force would pull at the step's start
+or end (the clamp binds inside the step) it hands the step to ``pair_impulses``, whose 1D
+solve locates the moment; friction's cap then applies to both alike
+(``contact_step.stick_or_slide``).
+
+It is measured here, in the NumPy twin of the step (``engine.reference``, the analytic
+integrator with ``ReferenceModel.impulses`` swapped; float64), on the two collisions of
+``dem_accuracy`` and the offset one without friction, each law, against the ODE
+(``collision_ode``), from 0.0125 to 1.6 stable_dt: restitution, contact duration and the
+square's spin after. It is not in the kernels: a Taichi twin needs the 4 x 4 exponential
+written out (scaling and squaring, the same operations in both twins), the clamp's end
+located on the coupled solution, and a block with several contacts (a jam) still takes its
+other contacts' forces from the last step (``docs/accuracy.md``).
+
+``python -m taichi_ice.commands.validate contact_coupling --out DIR [--quick]`` writes
+``contact_coupling.json``, ``contact_coupling.md`` and ``contact_coupling.png``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...physics.contact_step import onset, pair_impulses, spring_dashpot
+from ...physics.friction import Coulomb
+from . import collision_ode, dem_scenes
+
+__all__ = ["CASES", "RATIOS", "SOLVERS", "coupled_impulses", "measure", "run", "simulate"]
+
+RATIOS = (0.0125, 0.05, 0.2, 0.4, 0.8, 1.6)  # dt / stable_dt
+QUICK_RATIOS = (0.2, 0.8)
+# (name, lateral offset of the block (m), law): the offset collision without friction shows
+# that the decoupled solve's error is friction's (the tangent's spring and its cross term).
+CASES = (
+    ("face-on", 0.0, "coulomb"),
+    ("offset", dem_scenes.OFFSET, "coulomb"),
+    ("offset", dem_scenes.OFFSET, "rate-state"),
+    ("offset", dem_scenes.OFFSET, "frictionless"),
+)
+SOLVERS = ("decoupled", "coupled")  # pair_impulses (the kernels'), coupled_impulses
+MEASURES = ("restitution", "duration", "spin")
+# The face-on collision turns nothing (its spin is round-off): as ``dem_analysis.MEASURES``.
+CASE_MEASURES = {"face-on": ("restitution", "duration"), "offset": MEASURES}
+
+
+def _flow(x, u, h: float, s, c, w, a) -> tuple[np.ndarray, np.ndarray]:
+    """``(x(h), u(h))`` of ``x' = u, u' = a - W (S x + C u)`` from ``(x, u)``: the matrix
+    exponential of the affine system, the constant carried as a fifth coordinate."""
+    from scipy.linalg import expm
+
+    m = np.zeros((5, 5))
+    m[0:2, 2:4] = np.eye(2)
+    m[2:4, 0:2] = -w @ s
+    m[2:4, 2:4] = -w @ c
+    m[2:4, 4] = a
+    z = expm(m * h) @ np.array([x[0], x[1], u[0], u[1], 1.0])
+    return z[0:2], z[2:4]
+
+
+def coupled_impulses(
+    depth,
+    approach,
+    slip,
+    xi,
+    fresh,
+    approach_change,
+    slip_change,
+    last_force,
+    h,
+    k_n,
+    c_n,
+    k_t,
+    c_t,
+    inv_n,
+    inv_t,
+    *,
+    k_nt,
+    mu,
+):
+    """``contact_step.pair_impulses`` with the normal and the stuck tangent solved as one
+    system (module docstring); the same arguments and returns, ``k_nt``, the cross term of
+    the pair's inverse mass (1/kg), and ``mu``, the friction it would slide at. The returned
+    accelerations are the other forces'."""
+    args = (depth, approach, slip, xi, fresh, approach_change, slip_change, last_force, h)
+    w = np.array([[inv_n, -k_nt], [-k_nt, inv_t]])
+    s, c = np.diag([k_n, k_t]), np.diag([c_n, c_t])
+    w_inv = np.linalg.inv(w)
+    a = np.array([approach_change / h, slip_change / h])
+    tau = 0.0
+    if fresh:
+        tau = onset(depth, approach, h)
+    else:  # take this contact's own forces of the last step out of the change, both ways
+        a = a + w @ np.array([last_force[0], -last_force[1]])
+    x, u = np.array([depth, xi]), np.array([approach, slip])
+    p0, q0, viscous0 = np.zeros(2), np.zeros(2), 0.0
+    if tau > 0.0:
+        # Since onset: from rest at the approach it had then, to where the forces have it now.
+        xs, us = _flow(np.zeros(2), u - a * tau, tau, s, c, w, a)
+        p0, q0, viscous0 = w_inv @ (u - us), w_inv @ (x - xs), c_n * xs[0]
+        x, u = xs, us
+    x1, u1 = _flow(x, u, h, s, c, w, a)
+    if k_n * x[0] + c_n * u[0] < 0.0 or k_n * x1[0] + c_n * u1[0] < 0.0:
+        return pair_impulses(*args, k_n, c_n, k_t, c_t, inv_n, inv_t)
+    p = w_inv @ (u + a * h - u1)
+    q = w_inv @ (x + u * h + 0.5 * a * h * h - x1)
+    p_n, p_t = p0 + p
+    q_n, q_t = q0 + h * p0 + q
+    p_viscous = viscous0 + c_n * (x1[0] - x[0])
+    if abs(p_t) > mu * p_n:
+        # Sliding: the tangential force is sign mu times the normal one, so the normal moves
+        # alone at the inverse mass K_nn - sign mu K_nt; the stuck p_t stays (the cap,
+        # ``stick_or_slide``, then takes mu times this normal impulse, and rate and state its
+        # trial force from it).
+        inv_slide = inv_n - math.copysign(mu, p_t) * k_nt
+        if not inv_slide > 0.0:
+            return pair_impulses(*args, k_n, c_n, k_t, c_t, inv_n, inv_t)
+        p_n, q_n, p_viscous, _, _ = spring_dashpot(
+            depth, approach, h, k_n, c_n, inv_slide, a[0], True, tau
+        )
+    return p_n / h, (p_n - p_viscous) / h, q_n, p_t, q_t, x1[1], a[0], a[1]
+
+
+def _scene(offset: float, law: str):
+    if law == "frictionless":
+        return dem_scenes.collision(offset, "coulomb").with_friction(Coulomb(0.0))
+    return dem_scenes.collision(offset, law)
+
+
+def simulate(scene, dt: float, solver: str):
+    """The collision in the NumPy twin of the analytic step, ``solver`` its pair solve;
+    returns the final ``ReferenceState`` and the time it reached."""
+    from ...engine.reference import ReferenceModel, ReferenceState, reference_step
+
+    end = dem_scenes.COLLISION_END
+    batch = [dem_scenes.with_step(scene, dt, end)]
+    model = dataclasses.replace(
+        ReferenceModel.from_scenes(batch),
+        integrator="analytic",
+        quantum=None,
+        impulses=coupled_impulses if solver == "coupled" else None,
+    )
+    state = ReferenceState.from_scenes(batch)
+    steps = round(end / dt)
+    for _ in range(steps):
+        state = reference_step(state, model, dt)
+    return state, steps * dt
+
+
+def measure(scene, state, t_end: float) -> dict[str, float]:
+    """Restitution, contact duration and the square's spin after, as ``dem_analysis``."""
+    v = np.asarray(state.vel)
+    return {
+        "restitution": float((v[1, 0] - v[0, 0]) / dem_scenes.CLOSING_SPEED),
+        "duration": collision_ode.last_separation(
+            scene, state.pos, state.angle, state.vel, state.omega, t_end, 0.0
+        ),
+        "spin": float(state.omega[0]),
+    }
+
+
+def _reference(scene) -> dict[str, float]:
+    ode = collision_ode.solve_collision(scene, dem_scenes.COLLISION_END)
+    touch, apart = ode["contacts"][0]
+    v = np.asarray(ode["velocity"])
+    return {
+        "restitution": float((v[1, 0] - v[0, 0]) / dem_scenes.CLOSING_SPEED),
+        "duration": apart - touch,
+        "spin": float(ode["omega"][0]),
+    }
+
+
+def run(out: Path, quick: bool = False) -> dict[str, Any]:
+    """Every case, step and solver against the ODE; writes the JSON, table and chart."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ratios = QUICK_RATIOS if quick else RATIOS
+    rows, references = [], {}
+    start = time.perf_counter()
+    for name, offset, law in CASES:
+        scene = _scene(offset, law)
+        ref = references[f"{name}/{law}"] = _reference(scene)
+        for ratio in ratios:
+            for solver in SOLVERS:
+                t0 = time.perf_counter()
+                state, t_end = simulate(scene, ratio * scene.stable_dt, solver)
+                got = measure(scene, state, t_end)
+                err = {m: abs(got[m] / ref[m] - 1.0) for m in CASE_MEASURES[name]}
+                rows.append(
+                    {
+                        "case": name,
+                        "law": law,
+                        "ratio": ratio,
+                        "solver": solver,
+                        "value": got,
+                        "error": err,
+                        "wall_s": time.perf_counter() - t0,
+                    }
+                )
+        print(
+            f"contact coupling: {name} collision ({law}) at {len(ratios)} steps "
+            f"[{time.perf_counter() - start:.0f} s]",
+            flush=True,
+        )
+    result = {"references": references, "rows": rows, "ratios": list(ratios)}
+    (out / "contact_coupling.json").write_text(json.dumps(result, indent=1))
+    (out / "contact_coupling.md").write_text(table(result))
+    chart(result, out / "contact_coupling.png")
+    return result
+
+
+def error_of(result: dict, case: str, law: str, solver: str, measure_: str, ratio: float):
+    """One error of a ``run`` result (None if that run is not in it)."""
+    for r in result["rows"]:
+        if (r["case"], r["law"], r["solver"], r["ratio"]) == (case, law, solver, ratio):
+            return r["error"].get(measure_)
+    return None
+
+
+def table(result: dict) -> str:
+    """Markdown: each case, measure and solver's relative error at every step."""
+    ratios = result["ratios"]
+    head = "| collision | law | measure | solve | " + " | ".join(f"{r:g}" for r in ratios) + " |"
+    lines = [
+        "# The contact's two directions solved together, against apart (issue 30)",
+        "",
+        "Relative error against the ODE (`collision_ode`) at dt / stable_dt, in the NumPy "
+        "twin of the analytic step, float64 (`validation.contact_coupling`).",
+        "",
+        head,
+        "|---|---|---|---|" + "---:|" * len(ratios),
+    ]
+    for name, _, law in CASES:
+        for m in CASE_MEASURES[name]:
+            for solver in SOLVERS:
+                cells = []
+                for ratio in ratios:
+                    e = error_of(result, name, law, solver, m, ratio)
+                    cells.append("" if e is None or not math.isfinite(e) else f"{e:.2g}")
+                lines.append(f"| {name} | {law} | {m} | {solver} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def chart(result: dict, path: Path) -> Path:
+    """Restitution, duration and spin error against the step, each case; solid coupled,
+    dashed decoupled (the kernels')."""
+    from ...run.plots import save_figure, subplots
+
+    ratios = np.array(result["ratios"])
+    fig, axes = subplots(1, 3, figsize=(14, 4.4), layout="constrained")
+    colours = dict(zip([f"{n}/{law}" for n, _, law in CASES], ("C0", "C1", "C2", "C3")))
+    for ax, m in zip(axes, MEASURES):
+        for name, _, law in CASES:
+            for solver, style in zip(SOLVERS, ("--", "-")):
+                e = [error_of(result, name, law, solver, m, r) for r in ratios]
+                e = np.array([np.nan if v is None else max(v, 1e-12) for v in e])
+                ax.loglog(
+                    ratios,
+                    e,
+                    style,
+                    marker="o",
+                    color=colours[f"{name}/{law}"],
+                    label=f"{name}, {law}, {solver}",
+                )
+        ax.axvline(0.8, color="grey", lw=0.8)
+        ax.axhline(0.015, color="grey", lw=0.8, ls=":")
+        ax.set_title(f"{m} error")
+        ax.set_xlabel("dt / stable_dt")
+    axes[0].set_ylabel("relative error against the ODE")
+    axes[0].legend(fontsize=7)
+    return save_figure(fig, path)

@@ -106,3 +106,25 @@ def test_offset_collision_meets_issue_30s_target_at_four_times_the_default_step(
     # the line of both centroids).
     for solver in cc.SOLVERS:
         assert cc.error_of(result, "face-on", "coulomb", solver, "restitution", 0.8) < 1e-9
+    # The loaded stack ran with both solves at 0.8 and is in the table: a block with two
+    # contacts is where the joint solve does not help (docs/accuracy.md).
+    assert {(r["solver"], r["ratio"]) for r in result["stack"]} == {(s, 0.8) for s in cc.SOLVERS}
+    assert all(r["error"]["position"] < 1e-3 for r in result["stack"])
+    assert "| position | coupled |" in (tmp_path / "contact_coupling.md").read_text()
+
+
+def test_stack_is_a_loaded_jam_of_turning_blocks():
+    """The stack's scene is what its docstring says: three dynamic squares between a fixed
+    wall and a kinematic pusher, offset so that no contact is on the centroids' line."""
+    scene = cc.stack(0.1)
+    kinds = [b.kind for b in scene.bodies]
+    assert [str(k).lower().rsplit(".", 1)[-1] for k in kinds] == [
+        "fixed",
+        "dynamic",
+        "dynamic",
+        "dynamic",
+        "kinematic",
+    ]
+    ys = [b.position[1] for b in scene.bodies[1:4]]
+    assert ys == [0.25, -0.25, 0.25]
+    assert scene.bodies[-1].velocity[0] == -cc.STACK_SPEED

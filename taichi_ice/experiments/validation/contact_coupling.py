@@ -29,7 +29,8 @@ It is measured here, in the NumPy twin of the step (``engine.reference``, the an
 integrator with ``ReferenceModel.impulses`` swapped; float64), on the two collisions of
 ``dem_accuracy`` and the offset one without friction, each law, against the ODE
 (``collision_ode``), from 0.0125 to 1.6 stable_dt: restitution, contact duration and the
-square's spin after. It is not in the kernels: a Taichi twin needs the 4 x 4 exponential
+square's spin after; and on a loaded ``stack`` of three turning blocks between a wall and a
+pusher (two contacts a block), each solve against itself at 0.05 stable_dt, to 2.0. It is not in the kernels: a Taichi twin needs the 4 x 4 exponential
 written out (scaling and squaring, the same operations in both twins), the clamp's end
 located on the coupled solution, and a block with several contacts (a jam) still takes its
 other contacts' forces from the last step (``docs/accuracy.md``).
@@ -53,7 +54,17 @@ from ...physics.contact_step import onset, pair_impulses, spring_dashpot
 from ...physics.friction import Coulomb
 from . import collision_ode, dem_scenes
 
-__all__ = ["CASES", "RATIOS", "SOLVERS", "coupled_impulses", "measure", "run", "simulate"]
+__all__ = [
+    "CASES",
+    "RATIOS",
+    "SOLVERS",
+    "coupled_impulses",
+    "measure",
+    "run",
+    "run_stack",
+    "simulate",
+    "stack",
+]
 
 RATIOS = (0.0125, 0.05, 0.2, 0.4, 0.8, 1.6)  # dt / stable_dt
 QUICK_RATIOS = (0.2, 0.8)
@@ -67,6 +78,14 @@ CASES = (
 )
 SOLVERS = ("decoupled", "coupled")  # pair_impulses (the kernels'), coupled_impulses
 MEASURES = ("restitution", "duration", "spin")
+# The loaded stack: three squares between a wall and a pusher (``stack``), 0.25 s.
+STACK_BLOCKS = 3
+STACK_SPEED = 0.2  # m/s, the pusher's
+STACK_DURATION = 0.25  # s: the pusher 5 cm in, the blocks squeezed and turning
+STACK_REFERENCE = 0.05  # dt / stable_dt of each solve's own reference
+STACK_RATIOS = (0.2, 0.4, 0.8, 1.2, 1.7, 2.0)
+QUICK_STACK_RATIOS = (0.8,)
+QUICK_STACK_DURATION = 0.05
 # The face-on collision turns nothing (its spin is round-off): as ``dem_analysis.MEASURES``.
 CASE_MEASURES = {"face-on": ("restitution", "duration"), "offset": MEASURES}
 
@@ -174,6 +193,84 @@ def simulate(scene, dt: float, solver: str):
     return state, steps * dt
 
 
+def stack(duration: float = STACK_DURATION):
+    """``STACK_BLOCKS`` 1 m squares in a row between a fixed wall and a kinematic pusher that
+    closes at ``STACK_SPEED``, each a quarter metre above or below the last, so that every
+    contact is off the centroids and turns them: a block with two contacts, loaded."""
+    import copy
+
+    from ...scene.parse import load_scenario, scene_from_dict
+
+    raw = copy.deepcopy(dict(load_scenario("two_squares").raw))
+    wall = {"shape": "rectangle", "width": 0.5, "length": 3.0}
+    bodies = [{"name": "wall", "kind": "fixed", "position": [-0.25, 0.0], **wall}]
+    for k in range(STACK_BLOCKS):
+        bodies.append(
+            {
+                "name": f"block{k}",
+                "shape": "rectangle",
+                "width": 1.0,
+                "length": 1.0,
+                "position": [0.5 + k, 0.25 * (-1) ** k],
+            }
+        )
+    bodies.append(
+        {
+            "name": "pusher",
+            "kind": "kinematic",
+            "position": [STACK_BLOCKS + 0.25, 0.0],
+            "velocity": [-STACK_SPEED, 0.0],
+            **wall,
+        }
+    )
+    raw["body"] = bodies
+    raw["friction"] = Coulomb(0.5).to_dict()
+    raw["simulation"].update(duration=duration, output_interval=duration, series_interval=duration)
+    return scene_from_dict(raw, source="contact_coupling.stack")
+
+
+def run_stack(ratios, duration: float = STACK_DURATION) -> list[dict[str, Any]]:
+    """The stack at each step and solve, against the same solve at ``STACK_REFERENCE``:
+    the largest error of a block's position (m) and velocity (m/s) at the end, or the time
+    it diverged (a speed above 50 m/s or not finite)."""
+    from ...engine.reference import ReferenceModel, ReferenceState, reference_step
+
+    scene = stack(duration)
+
+    def one(ratio: float, solver: str):
+        dt = ratio * scene.stable_dt
+        model = dataclasses.replace(
+            ReferenceModel.from_scenes([scene]),
+            integrator="analytic",
+            quantum=None,
+            impulses=coupled_impulses if solver == "coupled" else None,
+        )
+        state = ReferenceState.from_scenes([scene])
+        for i in range(round(duration / dt)):
+            state = reference_step(state, model, dt)
+            if not np.all(np.isfinite(state.vel)) or np.abs(state.vel).max() > 50.0:
+                return None, (i + 1) * dt
+        return state, duration
+
+    blocks = slice(1, 1 + STACK_BLOCKS)
+    rows = []
+    for solver in SOLVERS:
+        ref, _ = one(STACK_REFERENCE, solver)
+        for ratio in ratios:
+            t0 = time.perf_counter()
+            state, t = one(ratio, solver)
+            row = {"case": "stack", "law": "coulomb", "ratio": ratio, "solver": solver}
+            if state is None:
+                row["diverged_at"] = t
+            else:
+                row["error"] = {
+                    "position": float(np.abs(state.pos[blocks] - ref.pos[blocks]).max()),
+                    "velocity": float(np.abs(state.vel[blocks] - ref.vel[blocks]).max()),
+                }
+            rows.append({**row, "wall_s": time.perf_counter() - t0})
+    return rows
+
+
 def measure(scene, state, t_end: float) -> dict[str, float]:
     """Restitution, contact duration and the square's spin after, as ``dem_analysis``."""
     v = np.asarray(state.vel)
@@ -229,7 +326,20 @@ def run(out: Path, quick: bool = False) -> dict[str, Any]:
             f"[{time.perf_counter() - start:.0f} s]",
             flush=True,
         )
-    result = {"references": references, "rows": rows, "ratios": list(ratios)}
+    stack_ratios = QUICK_STACK_RATIOS if quick else STACK_RATIOS
+    stack_rows = run_stack(stack_ratios, QUICK_STACK_DURATION if quick else STACK_DURATION)
+    print(
+        f"contact coupling: the stack at {len(stack_ratios)} steps "
+        f"[{time.perf_counter() - start:.0f} s]",
+        flush=True,
+    )
+    result = {
+        "references": references,
+        "rows": rows,
+        "ratios": list(ratios),
+        "stack": stack_rows,
+        "stack_ratios": list(stack_ratios),
+    }
     (out / "contact_coupling.json").write_text(json.dumps(result, indent=1))
     (out / "contact_coupling.md").write_text(table(result))
     chart(result, out / "contact_coupling.png")
@@ -265,6 +375,27 @@ def table(result: dict) -> str:
                     e = error_of(result, name, law, solver, m, ratio)
                     cells.append("" if e is None or not math.isfinite(e) else f"{e:.2g}")
                 lines.append(f"| {name} | {law} | {m} | {solver} | " + " | ".join(cells) + " |")
+    ratios = result["stack_ratios"]
+    lines += [
+        "",
+        "The loaded stack (`stack`): the largest error of a block's position (m) and velocity "
+        f"(m/s) against the same solve at {STACK_REFERENCE} stable_dt, or when it diverged.",
+        "",
+        "| measure | solve | " + " | ".join(f"{r:g}" for r in ratios) + " |",
+        "|---|---|" + "---:|" * len(ratios),
+    ]
+    for m in ("position", "velocity"):
+        for solver in SOLVERS:
+            cells = []
+            for ratio in ratios:
+                row = next(
+                    r for r in result["stack"] if (r["solver"], r["ratio"]) == (solver, ratio)
+                )
+                if "error" in row:
+                    cells.append(f"{row['error'][m]:.2g}")
+                else:
+                    cells.append(f"diverged at {row['diverged_at']:.3f} s")
+            lines.append(f"| {m} | {solver} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -274,9 +405,9 @@ def chart(result: dict, path: Path) -> Path:
     from ...run.plots import save_figure, subplots
 
     ratios = np.array(result["ratios"])
-    fig, axes = subplots(1, 3, figsize=(14, 4.4), layout="constrained")
+    fig, axes = subplots(1, 4, figsize=(18, 4.4), layout="constrained")
     colours = dict(zip([f"{n}/{law}" for n, _, law in CASES], ("C0", "C1", "C2", "C3")))
-    for ax, m in zip(axes, MEASURES):
+    for ax, m in zip(axes[:3], MEASURES):
         for name, _, law in CASES:
             for solver, style in zip(SOLVERS, ("--", "-")):
                 e = [error_of(result, name, law, solver, m, r) for r in ratios]
@@ -295,4 +426,22 @@ def chart(result: dict, path: Path) -> Path:
         ax.set_xlabel("dt / stable_dt")
     axes[0].set_ylabel("relative error against the ODE")
     axes[0].legend(fontsize=7)
+    ax = axes[3]
+    for solver, style in zip(SOLVERS, ("--", "-")):
+        rows = [r for r in result["stack"] if r["solver"] == solver and "error" in r]
+        ax.loglog(
+            [r["ratio"] for r in rows],
+            [max(r["error"]["position"], 1e-12) for r in rows],
+            style,
+            marker="s",
+            color="k",
+            label=f"stack, {solver}",
+        )
+        for r in result["stack"]:
+            if r["solver"] == solver and "error" not in r:
+                ax.axvline(r["ratio"], color="r", ls=style, lw=0.8)
+    ax.axvline(0.8, color="grey", lw=0.8)
+    ax.set_title("loaded stack: block position error (m)")
+    ax.set_xlabel("dt / stable_dt (red: diverged)")
+    ax.legend(fontsize=7)
     return save_figure(fig, path)

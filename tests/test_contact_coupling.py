@@ -1,85 +1,20 @@
-"""The candidate contact solve of issue 30 (``validation.contact_coupling``): the normal and the
-stuck tangent of a contact solved as one system over the step, measured in the NumPy twin.
-
-References: without the cross term it must be the analytic step's two 1D closed forms
-(``contact_step.pair_impulses``), here held against SciPy's matrix exponential; undamped and
-free of other forces, the coupled flow keeps the pair's energy; and on the offset collision
-it meets issue 30's target against the ODE (``collision_ode``) where the decoupled solve
-does not. NumPy only: no Taichi.
+"""The study behind the coupled integrator (``validation.contact_coupling``): a contact's
+normal and tangent solved apart (the analytic step) or together (the coupled one), in the
+NumPy twin, on the collisions against their ODE (``collision_ode``, SciPy) and on a loaded
+stack. The solve itself is tested in ``test_contact_coupled.py``. NumPy only: no Taichi.
 """
 
-import numpy as np
 import pytest
 
 from taichi_ice.experiments.validation import contact_coupling as cc
-from taichi_ice.physics.contact_step import pair_impulses
 
 pytest.importorskip("scipy")
-
-
-def _random_contact(rng):
-    """A contact that pushes through the whole step (no clamp inside it): ``pair_impulses``'
-    arguments, with stiffness, damping and masses of the scenes' orders."""
-    inv_n, inv_t = rng.uniform(2e-3, 2e-2, 2)
-    k_n = rng.uniform(2e7, 1e8)
-    k_t = rng.uniform(0.25, 1.0) * k_n
-    c_n = rng.uniform(0.05, 0.3) * 2.0 * np.sqrt(k_n / inv_n)
-    c_t = rng.uniform(0.05, 0.5) * 2.0 * np.sqrt(k_t / inv_t)
-    h = rng.uniform(0.02, 0.15) * np.sqrt(1.0 / (k_n * inv_n))  # a fraction of a radian
-    depth = rng.uniform(1e-4, 1e-3)
-    return dict(
-        depth=depth,
-        approach=rng.uniform(0.0, 0.5),
-        slip=rng.uniform(-0.5, 0.5),
-        xi=rng.uniform(-1e-4, 1e-4),
-        fresh=False,
-        approach_change=rng.uniform(-1e-3, 1e-3),
-        slip_change=rng.uniform(-1e-3, 1e-3),
-        last_force=(k_n * depth, rng.uniform(-1e3, 1e3)),
-        h=h,
-        k_n=k_n,
-        c_n=c_n,
-        k_t=k_t,
-        c_t=c_t,
-        inv_n=inv_n,
-        inv_t=inv_t,
-    )
-
-
-def test_without_cross_term_the_coupled_solve_is_the_two_closed_forms():
-    """k_nt = 0 decouples the system: the 4 x 4 exponential (SciPy) must give the impulses,
-    position impulses and stretch of ``pair_impulses``' two 1D solutions (fdlibm's exp, cos
-    and sin), to round-off, on 200 seeded contacts that stay stuck (mu large)."""
-    rng = np.random.default_rng(30)
-    for _ in range(200):
-        c = _random_contact(rng)
-        want = np.array(pair_impulses(*c.values()))
-        got = np.array(cc.coupled_impulses(*c.values(), k_nt=0.0, mu=1e9))
-        scale = np.maximum(np.abs(want), 1e-30)
-        np.testing.assert_array_less(np.abs(got - want) / scale, 1e-8)
-
-
-def test_undamped_coupled_flow_keeps_the_pairs_energy():
-    """No dashpots, no other forces: ``1/2 u^T W^-1 u + 1/2 x^T S x`` is constant along the
-    exact flow, whatever the cross term (W positive definite) and the step."""
-    rng = np.random.default_rng(7)
-    for _ in range(50):
-        k_nn, k_tt = rng.uniform(2e-3, 2e-2, 2)
-        k_nt = rng.uniform(-0.9, 0.9) * np.sqrt(k_nn * k_tt)
-        w = np.array([[k_nn, -k_nt], [-k_nt, k_tt]])
-        s = np.diag(rng.uniform(1e7, 1e8, 2))
-        x, u = rng.normal(0, 1e-3, 2), rng.normal(0, 0.5, 2)
-        h = rng.uniform(1e-5, 3e-3)
-        x1, u1 = cc._flow(x, u, h, s, np.zeros((2, 2)), w, np.zeros(2))
-        before = 0.5 * u @ np.linalg.solve(w, u) + 0.5 * x @ s @ x
-        after = 0.5 * u1 @ np.linalg.solve(w, u1) + 0.5 * x1 @ s @ x1
-        assert after == pytest.approx(before, rel=1e-10)
 
 
 def test_offset_collision_meets_issue_30s_target_at_four_times_the_default_step(tmp_path):
     """At 0.8 stable_dt (four times the default step) the coupled solve's restitution and
     duration are within issue 30's 1.5 % of the ODE for both laws, where the kernels'
-    decoupled solve is 2 % off (friction's spring coupled to the normal through the
+    analytic solve (apart) is 2 % off (friction's spring coupled to the normal through the
     bodies' turning, taken from the last step); without friction the two solves are one."""
     result = cc.run(tmp_path, quick=True)
     assert (tmp_path / "contact_coupling.png").stat().st_size > 0

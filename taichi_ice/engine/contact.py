@@ -56,6 +56,7 @@ from typing import ClassVar
 import taichi as ti
 
 from ..codes import BodyEnergy, Status
+from ..physics.contact_coupled_ti import coupled_impulses_ti
 from ..physics.contact_law_ti import (
     contact_work_ti,
     cross2,
@@ -306,18 +307,14 @@ class ContactStage(ContactLists):
                 rel_change = (d.body_dvel[j] + perp(d.body_domega[j], r_j)) - (
                     d.body_dvel[i] + perp(d.body_domega[i], r_i)
                 )
-            # The analytic step: the normal and the stuck tangential spring-dashpot each
-            # solved over the step (``contact_step_ti``), the mean forces f and the position
-            # impulses g (2 Q / dt^2) gathered; Euler's f (and g = f) where it cannot be (a
-            # pair of bodies that do not move, a contact of no width).
+            # The analytic step: the normal and the stuck tangential spring-dashpot solved
+            # over the step, apart (``contact_step_ti``) or together (``coupled``,
+            # ``contact_coupled_ti``), the mean forces f and the position impulses g (2 Q /
+            # dt^2) gathered; Euler's f (and g = f) where it cannot be (a pair of bodies
+            # that do not move, a contact of no width).
             exact = False
-            inv_n = 0.0 * k_e
-            inv_t = 0.0 * k_e
-            a_n = 0.0 * k_e
-            a_t = 0.0 * k_e
-            q_n = 0.0 * k_e
-            p_t = 0.0 * k_e
-            q_t = 0.0 * k_e
+            inv_n, inv_t, a_n, a_t, k_nt = 0.0 * k_e, 0.0 * k_e, 0.0 * k_e, 0.0 * k_e, 0.0 * k_e
+            q_n, p_t, q_t = 0.0 * k_e, 0.0 * k_e, 0.0 * k_e
             xi1 = xi
             if ti.static(self.layout.analytic):
                 mi, ii = m.body_inv_mass[i], m.body_inv_inertia[i]
@@ -330,23 +327,23 @@ class ContactStage(ContactLists):
                 )
                 exact = width > 0.0 and inv_n > 0.0 and inv_t > 0.0
                 if exact:
-                    f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = pair_impulses_ti(
-                        ti.max(area - crushed_new, 0.0) / width,
-                        approach,
-                        slip,
-                        xi,
-                        fresh,
-                        -rel_change.dot(normal),
-                        rel_change.dot(tangent),
-                        last_force,
-                        dt,
-                        k_e * width,
-                        k_v * width,
-                        k_t,
-                        c_t,
-                        inv_n,
-                        inv_t,
-                    )
+                    args = (
+                        ti.max(area - crushed_new, 0.0) / width, approach, slip, xi, fresh,
+                        -rel_change.dot(normal), rel_change.dot(tangent), last_force, dt,
+                        k_e * width, k_v * width, k_t, c_t, inv_n, inv_t,
+                    )  # fmt: skip
+                    if ti.static(self.layout.coupled):
+                        # Told the cross term of the pair's inverse mass and the friction
+                        # it would slide at (rate and state's mu is solved below).
+                        k_nt = ii * cross2(r_i, normal) * cross2(r_i, tangent)
+                        k_nt = k_nt + ij * cross2(r_j, normal) * cross2(r_j, tangent)
+                        rs = ti.static(self.layout.rate_state)
+                        mu_slide = m.world_mu0[w] if rs else m.world_mu[w]
+                        f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = coupled_impulses_ti(
+                            *args, k_nt, mu_slide
+                        )
+                    else:
+                        f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = pair_impulses_ti(*args)
                     if ti.static(self.layout.crushing):
                         if f_n > cap_n:  # the strength caps the step's mean force
                             scale = cap_n / f_n
@@ -424,6 +421,9 @@ class ContactStage(ContactLists):
                     if exact:
                         approach_change = (a_n - inv_n * f_n) * dt
                         slip_change = (a_t + inv_t * f_t) * dt
+                        if ti.static(self.layout.coupled):  # and its cross term
+                            approach_change -= k_nt * f_t * dt
+                            slip_change += k_nt * f_n * dt
                 held, viscous, friction = contact_work_ti(
                     f_n,
                     f_el,

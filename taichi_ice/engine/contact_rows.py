@@ -228,7 +228,7 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
         (int(o), int(state["partner"][o, s])): int(s)
         for o, s in zip(*np.nonzero(np.arange(state["partner"].shape[1]) < state["count"][:, None]))
     }
-    analytic = layout.integrator == "analytic"
+    analytic, coupled = layout.analytic, layout.coupled
     out = []
     for sl in world.batch.world_slices():
         i, j = candidate_pairs(pos[sl], radius[sl])
@@ -275,6 +275,7 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
                 else float(model.crushing_force[w]),
                 tol=model.tol,
                 analytic=analytic,
+                coupled=coupled,
             )
             if c is None:
                 continue

@@ -28,8 +28,10 @@ from ..errors import StabilityError, UsageError
 STEPPINGS = ("auto", "worlds", "bodies")
 # How a step moves the bodies (``Options.integrator``): "euler", semi-implicit Euler with the
 # contact forces of the step's start (first order); "analytic", each contact's spring-dashpot
-# integrated exactly over the step (``physics.contact_step``; second order).
-INTEGRATORS = ("euler", "analytic")
+# integrated exactly over the step (``physics.contact_step``; second order); "coupled", the
+# analytic step with each contact's normal and tangent solved together over the step
+# (``physics.contact_coupled``: the bodies' turning couples them).
+INTEGRATORS = ("euler", "analytic", "coupled")
 # Contact slots per body: DEFAULT_SMALL_SLOTS, plus one for each large body of its world (a
 # wall, a pusher) up to LARGE_SLOTS. A body owns its contacts with small bodies of higher id
 # and with large bodies. Measured with 6 slots, checked at every step (the overflow status):
@@ -64,7 +66,7 @@ class Options:
             (parallel over bodies: large worlds) or "auto" (``world.auto_stepping``).
         energy: keep the energy budget; off, trajectories are the same bit for bit and the
             step neither computes nor stores its terms (``schema.Layout.energy``).
-        integrator: "euler" or "analytic" (``INTEGRATORS``): compiled in
+        integrator: "euler", "analytic" or "coupled" (``INTEGRATORS``): compiled in
             (``schema.Layout.integrator``).
     """
 

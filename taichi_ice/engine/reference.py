@@ -24,7 +24,7 @@ it starts no Taichi.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -78,16 +78,13 @@ class ReferenceModel:
         crushing_force: ``(W,)`` strength x thickness (N/m), or None.
         tol: Newton's tolerance of the sliding rate.
         quantum: force resolution of the gather (N); None sums in floating point.
-        integrator: "euler" or "analytic" (``options.INTEGRATORS``).
+        integrator: "euler", "analytic" or "coupled" (``options.INTEGRATORS``).
         current, wind: ``(W, 2)`` uniform current and wind (m/s), or None.
         current_grid, wind_grid: ``(values, origin, spacing)`` of a gridded one
             (``forcing.grid_sample``), or None.
         c_air: ``(N,)`` wind drag coefficients (kg/m), or None without wind.
         coriolis: ``(W,)`` Coriolis parameters (1/s), or None. tilt: the current is
             geostrophic (its sea-surface tilt pushes the floes).
-        impulses: the analytic step's pair solve, None for the kernel's
-            (``reference_contact.contact_force``'s ``impulses``): a candidate step is
-            measured by swapping it here (``validation.contact_coupling``).
     """
 
     kind: np.ndarray
@@ -114,7 +111,6 @@ class ReferenceModel:
     c_air: np.ndarray | None = None
     coriolis: np.ndarray | None = None
     tilt: bool = False
-    impulses: Callable | None = None
 
     @property
     def n_bodies(self) -> int:
@@ -290,7 +286,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
     n = model.n_bodies
     new = state.copy()
     exact = model.quantum is None
-    analytic = model.integrator == "analytic"
+    analytic = model.integrator in ("analytic", "coupled")
     force_sum = np.zeros((n, 2)) if exact else [[0, 0] for _ in range(n)]
     torque_sum = np.zeros(n) if exact else [0] * n
     shift_sum = np.zeros((n, 2)) if exact else [[0, 0] for _ in range(n)]
@@ -347,7 +343,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 else float(model.crushing_force[w]),
                 tol=model.tol,
                 analytic=analytic,
-                impulses=model.impulses,
+                coupled=model.integrator == "coupled",
             )
             if c is None:
                 continue  # no overlap: the pair's memory is dropped

@@ -22,6 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..physics.contact_coupled import coupled_impulses
 from ..physics.contact_law import (
     contact_work,
     crush,
@@ -146,7 +147,7 @@ def contact_force(
     crushing_force: float | None = None,
     tol: float = NEWTON_TOLERANCE["f64"],
     analytic: bool = False,
-    impulses=None,
+    coupled: bool = False,
 ) -> ContactForce | None:
     """NumPy reference of ``ContactStage.pair``: the contact between an owner and a partner.
 
@@ -178,12 +179,10 @@ def contact_force(
         analytic: the analytic step (``physics.contact_step``): the normal and the stuck
             tangential spring-dashpot solved over the step, the pair's other forces told
             from ``dvel``, ``domega`` and the memory's ``force``.
-        impulses: the analytic step's solve of the pair over the step, in place of
-            ``contact_step.pair_impulses`` (a candidate measured against it, e.g.
-            ``validation.contact_coupling.coupled_impulses``): called with the same
-            arguments, ``k_nt``, the cross term of the pair's inverse mass between the
-            normal and the tangent (1/kg), and ``mu``, the friction it is likely to slide at
-            (Coulomb's, or rate and state's ``mu0``). None: ``pair_impulses``, as the kernel.
+        coupled: with ``analytic``, the pair's normal and stuck tangent solved together
+            (``contact_coupled.coupled_impulses``, the ``coupled`` integrator), told the
+            cross term of the pair's inverse mass and the friction it would slide at (the
+            Coulomb mu, or rate and state's mu0: its mu is solved after the impulses).
 
     Returns:
         A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
@@ -238,15 +237,13 @@ def contact_force(
         )
         exact = width > 0.0 and inv_n > 0.0 and inv_t > 0.0
     if exact:
-        solve, extra = pair_impulses, {}
-        if impulses is not None:
-            solve = impulses
-            # The cross term, and the friction the step is likely to slide at: the Coulomb
-            # mu, or the rate-and-state law's mu0 (its mu is solved only after this).
-            extra = {
-                "k_nt": inv_inertia[0] * ci_n * ci_t + inv_inertia[1] * cj_n * cj_t,
-                "mu": float(law) if isinstance(law, (int, float)) else law.contact_row()["mu0"],
-            }
+        solve, extra = pair_impulses, ()
+        if coupled:
+            solve = coupled_impulses
+            extra = (
+                inv_inertia[0] * ci_n * ci_t + inv_inertia[1] * cj_n * cj_t,
+                float(law) if isinstance(law, (int, float)) else law.contact_row()["mu0"],
+            )
         f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = solve(
             max(area - crushed, 0.0) / width,
             approach,
@@ -263,7 +260,7 @@ def contact_force(
             c_t,
             inv_n,
             inv_t,
-            **extra,
+            *extra,
         )
         if crushing_force is not None and f_n > cap_n:
             scale = cap_n / f_n
@@ -319,6 +316,9 @@ def contact_force(
     if exact:  # this step's change, its other forces' and its own
         approach_change = (a_n - inv_n * f_n) * dt
         slip_change = (a_t + inv_t * f_t) * dt
+        if coupled:  # and its cross term
+            approach_change -= extra[0] * f_t * dt
+            slip_change += extra[0] * f_n * dt
     held, viscous, friction = contact_work(
         f_n,
         f_el,

@@ -346,7 +346,7 @@ class Layout:
             energy, ``world_energy``); off, no kernel computes or stores a term of it, and
             the samples' energy columns are NaN.
         nbr_len: entries of a body's neighbour list.
-        integrator: how the step moves the bodies, "euler" or "analytic"
+        integrator: how the step moves the bodies, "euler", "analytic" or "coupled"
             (``options.INTEGRATORS``).
         current, wind, coriolis: an ocean current (``[water] current``), the wind's drag
             (``[wind]``), the Coriolis force (``[coriolis]``) are compiled in; without them
@@ -410,8 +410,15 @@ class Layout:
     @property
     def analytic(self) -> bool:
         """Each contact's spring-dashpot is integrated exactly over the step
-        (``integrator = "analytic"``): its position impulses are gathered too."""
-        return self.integrator == "analytic"
+        (``integrator = "analytic"`` or ``"coupled"``): its position impulses are gathered
+        too."""
+        return self.integrator in ("analytic", "coupled")
+
+    @property
+    def coupled(self) -> bool:
+        """The analytic step with a contact's normal and tangent solved together
+        (``integrator = "coupled"``, ``physics.contact_coupled``)."""
+        return self.integrator == "coupled"
 
     @property
     def velocity_changes(self) -> bool:

@@ -1,44 +1,24 @@
-"""A candidate for issue 30's second-order step: a contact's normal and tangent solved together.
+"""Why the ``coupled`` integrator: a contact's normal and tangent solved apart or together.
 
 The analytic step (``physics.contact_step``) solves each contact's normal spring-dashpot and
 its stuck tangential one as two damped oscillators, each at the pair's inverse mass along its
-own direction (``K_nn``, ``K_tt``), and takes what moves one direction through the other (the
-bodies' turning: ``K_nt = (r_i x n)(r_i x t) / I_i + (r_j x n)(r_j x t) / I_j``) from the
-last step's forces. An offset collision (``dem_scenes.collision(0.3)``) shows what that costs:
-without friction its restitution is 2e-5 off the ODE at every step (no tangential spring, no
-cross term to lag), with friction 2.1 % at 0.8 stable_dt (issue 30's target: 1.5 %), growing
-as the step squared above 0.2.
+own direction, and takes what moves one direction through the other (the bodies' turning:
+the cross term ``K_nt`` of the pair's inverse mass) from the last step's forces. The
+``coupled`` integrator (``physics.contact_coupled``) solves the two as one linear system over
+the step. This study runs both in the NumPy twin of the step (``engine.reference``, float64):
 
-The candidate, :func:`coupled_impulses`, solves the pair's two coordinates as one linear
-system over the step: ``x = (depth, stretch)``, ``u = x' = (approach, slip)``,
-
-    u' = a - W g,   g = S x + C u,   W = [[K_nn, -K_nt], [-K_nt, K_tt]],
-
-``S = diag(k_n, k_t)``, ``C = diag(c_n, c_t)``, ``g`` the normal force and the stuck
-tangential force against the stretch, ``a`` the other forces' acceleration of the two (the
-last step's change less all of this contact's own, cross term included), by the matrix
-exponential of the affine system (SciPy's ``expm``). The impulse and position impulse the
-bodies take follow from the solution as in ``contact_step.spring_dashpot``: ``P = W^-1 (u0 +
-a h - u(h))``, ``Q = W^-1 (x0 + u0 h + a h^2 / 2 - x(h))``; a contact that began inside the
-last step is integrated from its onset. Where the normal force would pull at the step's start
-or end (the clamp binds inside the step) it hands the step to ``pair_impulses``, whose 1D
-solve locates the moment; friction's cap then applies to both alike
-(``contact_step.stick_or_slide``).
-
-It is measured here, in the NumPy twin of the step (``engine.reference``, the analytic
-integrator with ``ReferenceModel.impulses`` swapped; float64), on the two collisions of
-``dem_accuracy`` and the offset one without friction, each law, against the ODE
-(``collision_ode``), from 0.0125 to 1.6 stable_dt: restitution, contact duration and the
-square's spin after; and on a loaded ``stack`` of three turning blocks between a wall and a
-pusher (two contacts a block), each solve against itself at 0.05 stable_dt, to 2.0. What it
-found: the collisions within 0.2 % at 0.8 stable_dt (2 % apart), the stack no closer (its
-positions 2.5x further off): a block with several contacts takes the others' forces from
-the last step either way. It is not in the kernels: a Taichi twin needs the 4 x 4
-exponential written out (scaling and squaring, the same operations in both twins), the
-clamp's end located on the coupled solution, and its cost measured (``docs/accuracy.md``).
+- the two collisions of ``dem_accuracy`` and the offset one without friction, each law,
+  against the ODE (``collision_ode``), from 0.0125 to 1.6 stable_dt: restitution, contact
+  duration and the square's spin after. Without friction the two are one (no tangential
+  spring); with it the offset collision's restitution is 2 % off apart at 0.8 stable_dt
+  and 0.2 % together;
+- a loaded ``stack`` of three turning blocks between a wall and a pusher (two contacts a
+  block), each solve against itself at 0.05 stable_dt, to 2.0: together is no closer (a
+  block with several contacts takes the others' forces from the last step either way).
 
 ``python -m taichi_ice.commands.validate contact_coupling --out DIR [--quick]`` writes
-``contact_coupling.json``, ``contact_coupling.md`` and ``contact_coupling.png``.
+``contact_coupling.json``, ``contact_coupling.md`` and ``contact_coupling.png``
+(``docs/accuracy.md``).
 """
 
 from __future__ import annotations
@@ -52,7 +32,6 @@ from typing import Any
 
 import numpy as np
 
-from ...physics.contact_step import onset, pair_impulses, spring_dashpot
 from ...physics.friction import Coulomb
 from . import collision_ode, dem_scenes
 
@@ -60,7 +39,6 @@ __all__ = [
     "CASES",
     "RATIOS",
     "SOLVERS",
-    "coupled_impulses",
     "measure",
     "run",
     "run_stack",
@@ -78,7 +56,9 @@ CASES = (
     ("offset", dem_scenes.OFFSET, "rate-state"),
     ("offset", dem_scenes.OFFSET, "frictionless"),
 )
-SOLVERS = ("decoupled", "coupled")  # pair_impulses (the kernels'), coupled_impulses
+# The analytic integrator's solve (``contact_step.pair_impulses``, apart) and the coupled
+# one's (``contact_coupled.coupled_impulses``, together).
+SOLVERS = ("decoupled", "coupled")
 MEASURES = ("restitution", "duration", "spin")
 # The loaded stack: three squares between a wall and a pusher (``stack``), 0.25 s.
 STACK_BLOCKS = 3
@@ -90,83 +70,6 @@ QUICK_STACK_RATIOS = (0.8,)
 QUICK_STACK_DURATION = 0.05
 # The face-on collision turns nothing (its spin is round-off): as ``dem_analysis.MEASURES``.
 CASE_MEASURES = {"face-on": ("restitution", "duration"), "offset": MEASURES}
-
-
-def _flow(x, u, h: float, s, c, w, a) -> tuple[np.ndarray, np.ndarray]:
-    """``(x(h), u(h))`` of ``x' = u, u' = a - W (S x + C u)`` from ``(x, u)``: the matrix
-    exponential of the affine system, the constant carried as a fifth coordinate."""
-    from scipy.linalg import expm
-
-    m = np.zeros((5, 5))
-    m[0:2, 2:4] = np.eye(2)
-    m[2:4, 0:2] = -w @ s
-    m[2:4, 2:4] = -w @ c
-    m[2:4, 4] = a
-    z = expm(m * h) @ np.array([x[0], x[1], u[0], u[1], 1.0])
-    return z[0:2], z[2:4]
-
-
-def coupled_impulses(
-    depth,
-    approach,
-    slip,
-    xi,
-    fresh,
-    approach_change,
-    slip_change,
-    last_force,
-    h,
-    k_n,
-    c_n,
-    k_t,
-    c_t,
-    inv_n,
-    inv_t,
-    *,
-    k_nt,
-    mu,
-):
-    """``contact_step.pair_impulses`` with the normal and the stuck tangent solved as one
-    system (module docstring); the same arguments and returns, ``k_nt``, the cross term of
-    the pair's inverse mass (1/kg), and ``mu``, the friction it would slide at. The returned
-    accelerations are the other forces'."""
-    args = (depth, approach, slip, xi, fresh, approach_change, slip_change, last_force, h)
-    w = np.array([[inv_n, -k_nt], [-k_nt, inv_t]])
-    s, c = np.diag([k_n, k_t]), np.diag([c_n, c_t])
-    w_inv = np.linalg.inv(w)
-    a = np.array([approach_change / h, slip_change / h])
-    tau = 0.0
-    if fresh:
-        tau = onset(depth, approach, h)
-    else:  # take this contact's own forces of the last step out of the change, both ways
-        a = a + w @ np.array([last_force[0], -last_force[1]])
-    x, u = np.array([depth, xi]), np.array([approach, slip])
-    p0, q0, viscous0 = np.zeros(2), np.zeros(2), 0.0
-    if tau > 0.0:
-        # Since onset: from rest at the approach it had then, to where the forces have it now.
-        xs, us = _flow(np.zeros(2), u - a * tau, tau, s, c, w, a)
-        p0, q0, viscous0 = w_inv @ (u - us), w_inv @ (x - xs), c_n * xs[0]
-        x, u = xs, us
-    x1, u1 = _flow(x, u, h, s, c, w, a)
-    if k_n * x[0] + c_n * u[0] < 0.0 or k_n * x1[0] + c_n * u1[0] < 0.0:
-        return pair_impulses(*args, k_n, c_n, k_t, c_t, inv_n, inv_t)
-    p = w_inv @ (u + a * h - u1)
-    q = w_inv @ (x + u * h + 0.5 * a * h * h - x1)
-    p_n, p_t = p0 + p
-    q_n, q_t = q0 + h * p0 + q
-    p_viscous = viscous0 + c_n * (x1[0] - x[0])
-    if abs(p_t) > mu * p_n:
-        # Sliding: the tangential force is sign mu times the normal one, so the normal moves
-        # alone at the inverse mass K_nn - sign mu K_nt; the stuck p_t stays (the cap,
-        # ``stick_or_slide``, then takes mu times this normal impulse, and rate and state its
-        # trial force from it).
-        inv_slide = inv_n - math.copysign(mu, p_t) * k_nt
-        if not inv_slide > 0.0:
-            return pair_impulses(*args, k_n, c_n, k_t, c_t, inv_n, inv_t)
-        p_n, q_n, p_viscous, _, _ = spring_dashpot(
-            depth, approach, h, k_n, c_n, inv_slide, a[0], True, tau
-        )
-    return p_n / h, (p_n - p_viscous) / h, q_n, p_t, q_t, x1[1], a[0], a[1]
 
 
 def _scene(offset: float, law: str):
@@ -184,9 +87,8 @@ def simulate(scene, dt: float, solver: str):
     batch = [dem_scenes.with_step(scene, dt, end)]
     model = dataclasses.replace(
         ReferenceModel.from_scenes(batch),
-        integrator="analytic",
+        integrator="analytic" if solver == "decoupled" else "coupled",
         quantum=None,
-        impulses=coupled_impulses if solver == "coupled" else None,
     )
     state = ReferenceState.from_scenes(batch)
     steps = round(end / dt)
@@ -243,9 +145,8 @@ def run_stack(ratios, duration: float = STACK_DURATION) -> list[dict[str, Any]]:
         dt = ratio * scene.stable_dt
         model = dataclasses.replace(
             ReferenceModel.from_scenes([scene]),
-            integrator="analytic",
+            integrator="analytic" if solver == "decoupled" else "coupled",
             quantum=None,
-            impulses=coupled_impulses if solver == "coupled" else None,
         )
         state = ReferenceState.from_scenes([scene])
         for i in range(round(duration / dt)):

@@ -29,9 +29,11 @@ COLORS = {
     "rate-state": "C3",
     "coulomb, analytic": "C2",
     "rate-state, analytic": "C1",
+    "coulomb, coupled": "C4",
+    "rate-state, coupled": "C5",
 }
-MARKERS = {"euler": "o", "analytic": "s"}
-INTEGRATOR_COLORS = {"euler": "C0", "analytic": "C2"}
+MARKERS = {"euler": "o", "analytic": "s", "coupled": "^"}
+INTEGRATOR_COLORS = {"euler": "C0", "analytic": "C2", "coupled": "C4"}
 STYLES = {"f64": "-", "f32": "--"}
 UNITS = {"positions": "largest block displacement (m)"}
 
@@ -205,7 +207,7 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
                 fontsize=8,
                 color=color,
             )
-    ax2.set_xlabel("dt / stable_dt (o, s survived: Euler, analytic; x diverged)")
+    ax2.set_xlabel("dt / stable_dt (o, s, ^ survived: Euler, analytic, coupled; x diverged)")
     ax2.set_title("(b) the largest step each scene survives")
     fig.savefig(path, dpi=80)
 

@@ -47,13 +47,15 @@ UNTIL = 20.0  # s: the paper's run
 LAWS = ("coulomb", "rate-state")
 BASELINE = ("euler", 0.2)  # the default integrator at the default step
 REFERENCE = ("euler", 0.05)  # a quarter of it
-# (integrator, dt / stable_dt): 4x the default step with each integrator, the analytic step
-# at the default one, and both at a quarter of it.
+# (integrator, dt / stable_dt): 4x the default step with each integrator, the analytic and
+# coupled steps at the default one, and Euler and the analytic step at a quarter of it.
 CASES = (
     BASELINE,
     ("euler", 0.8),
     ("analytic", 0.2),
     ("analytic", 0.8),
+    ("coupled", 0.2),
+    ("coupled", 0.8),
     REFERENCE,
     ("analytic", 0.05),
 )
@@ -62,6 +64,8 @@ COMPARISONS = (
     (("euler", 0.8), BASELINE),
     (("analytic", 0.2), BASELINE),
     (("analytic", 0.8), BASELINE),
+    (("coupled", 0.2), BASELINE),
+    (("coupled", 0.8), BASELINE),
     (BASELINE, REFERENCE),
     (("analytic", 0.05), REFERENCE),
 )

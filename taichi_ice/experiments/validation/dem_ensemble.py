@@ -41,6 +41,7 @@ import numpy as np
 
 from ..inference import holm
 from ..inference import mcnemar as _mcnemar_test
+from .dem_charts import INTEGRATOR_COLORS
 
 LAYOUTS = 32
 UNTIL = 20.0  # s: the paper's run
@@ -66,6 +67,7 @@ COMPARISONS = (
     (("analytic", 0.8), BASELINE),
     (("coupled", 0.2), BASELINE),
     (("coupled", 0.8), BASELINE),
+    (("coupled", 0.8), ("coupled", 0.2)),
     (BASELINE, REFERENCE),
     (("analytic", 0.05), REFERENCE),
 )
@@ -239,7 +241,7 @@ def plot(summary: dict[str, Any], path: Path) -> None:
             for k, r in enumerate(runs):
                 v = np.asarray(r[m], dtype=float)
                 half = 1.96 * v.std(ddof=1) / math.sqrt(v.size) if v.size > 1 else 0.0
-                color = "C0" if r["integrator"] == "euler" else "C2"
+                color = INTEGRATOR_COLORS.get(r["integrator"], "C7")
                 ax.plot(np.full(v.size, k) + 0.08, v, ".", color=color, alpha=0.3, ms=4)
                 ax.errorbar(k - 0.08, v.mean(), yerr=half, fmt="o", color=color, capsize=3)
                 if (r["integrator"], r["nominal"]) == BASELINE:

@@ -16,6 +16,7 @@ What the lane holds and why (the CPU suite runs all of it too):
 - ``test_fmath.py``: the float64 exp and log that SPIR-V lacks;
 - ``test_geometry.py``, ``test_contact.py``: the overlap and contact kernels against their
   NumPy twins and shapely;
+- ``test_contact_coupled.py``: the coupled step's 4 x 4 solve against its NumPy twin;
 - ``test_contact_step.py``: the analytic step's spring-dashpot against its NumPy twin (to
   float32's round-off in a float32 run) and the clamped oscillator;
 - ``test_friction.py``, ``test_slip.py``: the laws' kernels against their twins and closed
@@ -43,6 +44,7 @@ LANE = {
         "tests/test_geometry.py",
         "tests/test_contact.py",
         "tests/test_contact_step.py",
+        "tests/test_contact_coupled.py",
         "tests/test_friction.py",
         "tests/test_slip.py",
         "tests/test_engine.py",
@@ -55,6 +57,7 @@ LANE = {
         "tests/test_fmath.py",
         "tests/test_contact.py",
         "tests/test_contact_step.py",
+        "tests/test_contact_coupled.py",
         "tests/test_friction.py",
         "tests/test_engine.py",
         "tests/test_forcing.py",

@@ -21,6 +21,7 @@ from taichi_ice.experiments.bench.scenes import (
     BLOCK_LENGTH,
     BLOCK_WIDTH,
     RANDOM_AREA_FRACTION,
+    bench_scene,
     random_box,
     random_scene,
 )
@@ -232,3 +233,30 @@ def test_a_size_the_scene_cannot_hold_is_refused(capsys):
     assert main(["bench", "--sizes", "50", "--no-box2d"]) == 2
     said = capsys.readouterr().err
     assert "--sizes 50" in said and "at least 100 blocks" in said
+
+
+def test_integrator_and_step_are_options(tmp_path, capsys):
+    """`--integrator coupled --dt-safety 0.8` runs the DEM with that integrator at four
+    times the default step: the row says so, and its simulated time per wall second is its
+    throughput times that step. A step fraction outside (0, 1] is refused in one line."""
+    out = tmp_path / "bench"
+    argv = ["bench", "--sizes", "200", "--steps", "5", "--precision", "f64", "--no-box2d"]
+    argv += ["--warm-cache", "--quick", "--out", str(out)]
+    assert main([*argv, "--integrator", "coupled", "--dt-safety", "0.8"]) == 0
+    with open(out / "bench.csv", newline="") as fh:
+        row = next(csv.DictReader(fh))
+    record = json.loads((out / "bench.json").read_text())
+    layout = record["runs"][0]["layout"]
+    assert row["integrator"] == "coupled" and layout["integrator"] == "coupled"
+    scene, _ = bench_scene("random", 200, "coulomb", False, 0)
+    # (the CSV keeps six digits)
+    assert float(row["dt_s"]) == pytest.approx(0.8 * scene.stable_dt, rel=1e-5)
+    assert float(row["body_s_per_s"]) == pytest.approx(
+        float(row["body_steps_per_s"]) * float(row["dt_s"]), rel=1e-4
+    )
+    for bad in ("0", "1.5", "fast"):
+        with pytest.raises(SystemExit) as stop:
+            main(["bench", "--dt-safety", bad])
+        assert stop.value.code == 2
+        said = capsys.readouterr().err
+        assert f"{bad!r}: give a fraction of the stability limit in (0, 1]" in said

@@ -7,8 +7,10 @@ The benchmark itself, which runs what the options say, is ``bench.bench_command`
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
+from ..engine.options import INTEGRATORS
 from ..experiments.bench import DEFAULT_STEPS, QUICK_STEPS, box2d
 from ..experiments.bench.scenes import SCENES
 from .args import nonnegative_int
@@ -33,6 +35,18 @@ def _steps(text: str) -> int:
         value = 0
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: use a whole number of steps, 1 or more")
+    return value
+
+
+def _safety(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value <= 1.0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give a fraction of the stability limit in (0, 1], e.g. 0.8"
+        )
     return value
 
 
@@ -70,6 +84,20 @@ def add_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="keep the energy budget in the timed runs (default off: like Box2D, the "
         "benchmark asks for motion only; World(energy=False))",
+    )
+    p.add_argument(
+        "--integrator",
+        default="euler",
+        choices=list(INTEGRATORS),
+        help="the DEM's integrator (run --integrator; default euler)",
+    )
+    p.add_argument(
+        "--dt-safety",
+        type=_safety,
+        default=None,
+        metavar="FRACTION",
+        help="the DEM's step as a fraction of the contact stability limit, in (0, 1] "
+        "(default the scene's, 0.2; docs/accuracy.md gives 0.8 for --integrator coupled)",
     )
     p.add_argument(
         "--steps",

@@ -113,8 +113,10 @@ def measure_size(spec: dict) -> dict:
 
     ``spec`` holds ``scene``, ``blocks``, ``law``, ``water``, ``energy`` (keep the budget;
     default off), ``seed``, ``cache`` (a folder for the placement, shared by the runs of a
-    size, or None), ``arch``, ``precision``, ``steps``, ``threads``, and ``box2d`` (None, or
-    the ``dt``, ``substeps`` and list of ``threads`` of ``compare_box2d``).
+    size, or None), ``arch``, ``precision``, ``steps``, ``threads``, ``integrator`` (default
+    euler) and ``dt_safety`` (the step as a fraction of the stability limit; None: the
+    scene's), and ``box2d`` (None, or the ``dt``, ``substeps`` and list of ``threads`` of
+    ``compare_box2d``).
     """
     from ... import backend
 
@@ -135,7 +137,14 @@ def measure_size(spec: dict) -> dict:
     progress(f"  {n_blocks} blocks, {spec['precision']}: scene {scene_s:.2f} s", end="")
 
     start = time.perf_counter()
-    world = World([scene], precision=spec["precision"], energy=spec.get("energy", False))
+    safety = spec.get("dt_safety")
+    world = World(
+        [scene],
+        precision=spec["precision"],
+        energy=spec.get("energy", False),
+        integrator=spec.get("integrator", "euler"),
+        dt=None if safety is None else safety * scene.stable_dt,
+    )
     ti.sync()
     world_s = time.perf_counter() - start
     progress(f", world {world_s:.2f} s", end="")
@@ -182,6 +191,7 @@ def measure_size(spec: dict) -> dict:
         "area_fraction": facts["area_fraction"],
         "steps": steps,
         "dt_s": world.dt,
+        "integrator": world.options.integrator,
         "law": spec["law"],
         "water": int(spec["water"]),
         "energy": int(spec.get("energy", False)),

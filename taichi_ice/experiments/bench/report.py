@@ -30,6 +30,7 @@ CSV_COLUMNS = (
     "area_fraction",
     "steps",
     "dt_s",
+    "integrator",
     "law",
     "water",
     "energy",

@@ -23,9 +23,9 @@
   slider's frictional work and slip starts, a block that slid holding or sliding under a
   pull, steady sliding on a moving floor against mu_ss, every law in the pillar scene before
   runs part; and what the tangential stiffness and the steady-state law's t_c change.
-- ``contact_coupling``: a candidate for issue 30's step, measured in the NumPy twin: a
-  contact's normal and tangent solved as one system over the step, against the analytic
-  step's two solves apart, on the collisions against their ODE.
+- ``contact_coupling`` (``--dem``): why the coupled integrator: a contact's normal and
+  tangent solved apart (analytic) and together (coupled) in the NumPy twin, on the
+  collisions against their ODE and on a loaded stack.
 """
 
 from __future__ import annotations
@@ -63,10 +63,11 @@ def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bo
 
         speed_accuracy.run(out_dir, quick=quick)
     if dem:
-        from . import contact_convergence, dem_accuracy, dem_ensemble
+        from . import contact_convergence, contact_coupling, dem_accuracy, dem_ensemble
 
         dem_accuracy.run(out_dir, quick=quick)
         dem_ensemble.run(out_dir, quick=quick)
         contact_convergence.run(out_dir, quick=quick)
+        contact_coupling.run(out_dir, quick=quick)
     print(f"validate: done in {time.perf_counter() - start:.1f} s; results in {out_dir}/")
     return 0

@@ -289,8 +289,7 @@ class ContactStage(ContactLists):
                 if crushed_new > crushed and width > 0.0:
                     crush_work = cap_n * (crushed_new - crushed) / width
 
-            # Tangential: a stick spring proportional to the contact width and a dashpot
-            # that damps it to a fraction of critical, ``tangential_damping_ti``.
+            # Tangential: a stick spring ~ the contact width, damped by ``tangential_damping_ti``.
             k_t = m.world_tangential_stiffness[w] * k_e * width
             c_t = tangential_damping_ti(
                 k_t,
@@ -333,12 +332,13 @@ class ContactStage(ContactLists):
                         k_e * width, k_v * width, k_t, c_t, inv_n, inv_t,
                     )  # fmt: skip
                     if ti.static(self.layout.coupled):
-                        # Told the cross term of the pair's inverse mass and the friction
-                        # it would slide at (rate and state's mu is solved below).
                         k_nt = ii * cross2(r_i, normal) * cross2(r_i, tangent)
                         k_nt = k_nt + ij * cross2(r_j, normal) * cross2(r_j, tangent)
-                        rs = ti.static(self.layout.rate_state)
-                        mu_slide = m.world_mu0[w] if rs else m.world_mu[w]
+                        mu_slide = 0.0 * k_e  # the mu it would slide at (rate and state's: mu0)
+                        if ti.static(self.layout.rate_state):
+                            mu_slide = m.world_mu0[w]
+                        else:
+                            mu_slide = m.world_mu[w]
                         f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = coupled_impulses_ti(
                             *args, k_nt, mu_slide
                         )

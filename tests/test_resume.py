@@ -48,9 +48,13 @@ def fields(sim) -> dict:
     return out
 
 
-def test_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, monkeypatch):
+@pytest.mark.parametrize("integrator", ["euler", "coupled"])
+def test_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, monkeypatch, integrator):
+    """Killed between two checkpoints and resumed, a run's file and state equal the run's
+    that was never stopped, with the default step and with the coupled one (whose contacts
+    also carry their last mean forces)."""
     scene = jam()
-    whole = Simulation(scene)
+    whole = Simulation(scene, integrator=integrator)
     whole.run(until=UNTIL, out=tmp_path / "whole.h5")
 
     path = tmp_path / "killed.h5"
@@ -65,7 +69,7 @@ def test_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, monkeypa
 
     monkeypatch.setattr(RunWriter, "flush", flush_then_die)
     with pytest.raises(KeyboardInterrupt):
-        Simulation(scene).run(until=UNTIL, out=path, checkpoint_every=0)
+        Simulation(scene, integrator=integrator).run(until=UNTIL, out=path, checkpoint_every=0)
     monkeypatch.setattr(RunWriter, "flush", flush)
 
     saved = ckpt.read(ckpt.path_for(path))
@@ -79,7 +83,7 @@ def test_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, monkeypa
     assert np.any((theta != NO_INTERFACE) & (theta != 0.0))
     assert saved["attrs"]["steps"] > 0
 
-    resumed = Simulation(scene)
+    resumed = Simulation(scene, integrator=integrator)
     result = resumed.run(until=UNTIL, out=path, resume=True)
     assert result.status == "complete"
 

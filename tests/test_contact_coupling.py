@@ -8,8 +8,6 @@ import pytest
 
 from taichi_ice.experiments.validation import contact_coupling as cc
 
-pytest.importorskip("scipy")
-
 
 def test_offset_collision_meets_issue_30s_target_at_four_times_the_default_step(tmp_path):
     """At 0.8 stable_dt (four times the default step) the coupled solve's restitution and

@@ -700,6 +700,7 @@ def assert_same_motion(a: World, b: World) -> None:
         ("bodies", "euler"),
         ("worlds", "analytic"),
         ("bodies", "analytic"),
+        ("worlds", "coupled"),
         ("bodies", "coupled"),
     ],
 )

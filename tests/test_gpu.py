@@ -53,9 +53,12 @@ import numpy as np
 from taichi_ice import Simulation, backend, load_scenario
 from taichi_ice.physics.friction import Coulomb, RateState
 name, law, until, precision = sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4]
+integrator = sys.argv[5]
 backend.init("cpu", precision)
 friction = Coulomb(mu=0.5) if law == "coulomb" else RateState()
-sim = Simulation(load_scenario(name), friction=friction, arch="cpu", precision=precision)
+sim = Simulation(
+    load_scenario(name), friction=friction, arch="cpu", precision=precision, integrator=integrator
+)
 result = sim.run(until=until)
 w = sim.world
 s = result.series[0]
@@ -75,9 +78,9 @@ def gpu(taichi_runtime):
     return arch, precision
 
 
-def on_cpu(name: str, law: str, until: float, precision: str) -> dict:
+def on_cpu(name: str, law: str, until: float, precision: str, integrator: str) -> dict:
     proc = subprocess.run(
-        [sys.executable, "-c", CHILD, name, law, repr(until), precision],
+        [sys.executable, "-c", CHILD, name, law, repr(until), precision, integrator],
         capture_output=True,
         text=True,
         timeout=900,
@@ -87,8 +90,14 @@ def on_cpu(name: str, law: str, until: float, precision: str) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def on_here(name: str, law: str, until: float, arch: str, precision: str) -> dict:
-    sim = Simulation(load_scenario(name), friction=LAWS[law], arch=arch, precision=precision)
+def on_here(name: str, law: str, until: float, arch: str, precision: str, integrator: str) -> dict:
+    sim = Simulation(
+        load_scenario(name),
+        friction=LAWS[law],
+        arch=arch,
+        precision=precision,
+        integrator=integrator,
+    )
     result = sim.run(until=until)
     w = sim.world
     return {
@@ -103,18 +112,30 @@ def on_here(name: str, law: str, until: float, arch: str, precision: str) -> dic
 @pytest.mark.parametrize("law", sorted(LAWS))
 @pytest.mark.parametrize("name", sorted(SCENES))
 def test_a_scene_on_the_gpu_equals_the_cpu(name, law, gpu):
+    assert_same_on_both(name, law, "euler", gpu)
+
+
+@pytest.mark.parametrize("law", sorted(LAWS))
+@pytest.mark.parametrize("name", ["two_squares", "pillar"])
+def test_the_coupled_step_on_the_gpu_equals_the_cpu(name, law, gpu):
+    """The coupled step's 4 x 4 exponential (plain arithmetic and a square root) and its 1D
+    solves (fdlibm's exp on every backend in float64) give the CPU's trajectories."""
+    assert_same_on_both(name, law, "coupled", gpu)
+
+
+def assert_same_on_both(name, law, integrator, gpu):
     arch, precision = gpu
     until = SCENES[name]
-    want = on_cpu(name, law, until, precision)
-    got = on_here(name, law, until, arch, precision)
+    want = on_cpu(name, law, until, precision, integrator)
+    got = on_here(name, law, until, arch, precision, integrator)
     assert got["steps"] == want["steps"]
     rtol = (RS_RTOL if law == "rate-state" else RTOL)[precision]
     pos, want_pos = np.asarray(got["pos"]), np.asarray(want["pos"])
     scale = max(1.0, float(np.max(np.abs(want_pos))))
     same = np.mean(pos == want_pos)
     err = float(np.max(np.abs(pos - want_pos))) / scale
-    print(f"{name} {law} {arch}/{precision}: positions {100 * same:.0f} % bit for bit, "
-          f"largest difference {err:.2e} of the scene's size")  # fmt: skip
+    print(f"{name} {law} {integrator} {arch}/{precision}: positions {100 * same:.0f} % bit "
+          f"for bit, largest difference {err:.2e} of the scene's size")  # fmt: skip
     assert err <= rtol, err
     np.testing.assert_allclose(got["ang"], want["ang"], rtol=0, atol=rtol * 10)
     s, t = got["series"], want["series"]
@@ -129,7 +150,7 @@ def test_pushed_field_touches_the_field_on_the_gpu(gpu):
     """The reproduction of issue 28: on Vulkan in float32 the pusher never reached the
     field (no contact, 0 J in, the file marked complete)."""
     arch, precision = gpu
-    got = on_here("pushed_field", "coulomb", SCENES["pushed_field"], arch, precision)
+    got = on_here("pushed_field", "coulomb", SCENES["pushed_field"], arch, precision, "euler")
     assert np.max(got["series"]["n_contacts"]) > 0
     assert got["series"]["work_in"][-1] > 0.0
 

@@ -228,7 +228,6 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
         (int(o), int(state["partner"][o, s])): int(s)
         for o, s in zip(*np.nonzero(np.arange(state["partner"].shape[1]) < state["count"][:, None]))
     }
-    analytic, coupled = layout.analytic, layout.coupled
     out = []
     for sl in world.batch.world_slices():
         i, j = candidate_pairs(pos[sl], radius[sl])
@@ -244,7 +243,6 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
         order = np.lexsort((partner, owner))
         rows = []
         for o, p in zip(owner[order].tolist(), partner[order].tolist()):
-            w = int(model.world[o])
             slot = slot_of.get((o, p))
             memory = None if slot is None else _memory(state, o, slot)
             origin = pos[o]
@@ -259,23 +257,10 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
                 state["vel"][p],
                 float(state["omega"][p]),
                 dt=float(world.dt),
-                k_e=float(model.k_e[w]),
-                k_v=float(model.k_v[w]),
-                ratio=float(model.ratio[w]),
-                law=model.laws[w],
-                inv_mass=(model.inv_mass(o), model.inv_mass(p)),
-                inv_inertia=(model.inv_inertia(o), model.inv_inertia(p)),
-                zeta=float(model.zeta[w]),
                 dvel=(state["dvel"][o], state["dvel"][p]),
                 domega=(float(state["domega"][o]), float(state["domega"][p])),
                 memory=memory,
-                method=model.method,
-                crushing_force=None
-                if model.crushing_force is None
-                else float(model.crushing_force[w]),
-                tol=model.tol,
-                analytic=analytic,
-                coupled=coupled,
+                **model.pair(o, p),
             )
             if c is None:
                 continue

@@ -116,6 +116,11 @@ class ReferenceModel:
     def n_bodies(self) -> int:
         return len(self.kind)
 
+    @property
+    def analytic(self) -> bool:
+        """Contacts solved over the step, apart or together (``schema.Layout.analytic``)."""
+        return self.integrator in ("analytic", "coupled")
+
     def current_at(self, i: int, pos, t: float) -> np.ndarray:
         """The current at body i's centroid ``pos`` at time ``t`` (m/s)."""
         return _field_at(self.current, self.current_grid, int(self.world[i]), pos, t)
@@ -131,6 +136,28 @@ class ReferenceModel:
     def inv_inertia(self, i: int) -> float:
         """``1 / I`` of body i (1/(kg m^2)), 0 unless it is dynamic."""
         return 1.0 / float(self.inertia[i]) if self.kind[i] == BodyKind.DYNAMIC else 0.0
+
+    def pair(self, i: int, j: int) -> dict:
+        """What ``reference_contact.contact_force`` takes from the model for the pair of
+        owner ``i`` and partner ``j`` (the world's contact law and values, the two bodies'
+        inverse mass and inertia, the integrator), as keywords."""
+        w = int(self.world[i])
+        return {
+            "k_e": float(self.k_e[w]),
+            "k_v": float(self.k_v[w]),
+            "ratio": float(self.ratio[w]),
+            "law": self.laws[w],
+            "inv_mass": (self.inv_mass(i), self.inv_mass(j)),
+            "inv_inertia": (self.inv_inertia(i), self.inv_inertia(j)),
+            "zeta": float(self.zeta[w]),
+            "method": self.method,
+            "crushing_force": None
+            if self.crushing_force is None
+            else float(self.crushing_force[w]),
+            "tol": self.tol,
+            "analytic": self.analytic,
+            "coupled": self.integrator == "coupled",
+        }
 
     @classmethod
     def from_batch(cls, batch: Batch, quantum: float | None = FORCE_QUANTUM):
@@ -286,7 +313,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
     n = model.n_bodies
     new = state.copy()
     exact = model.quantum is None
-    analytic = model.integrator in ("analytic", "coupled")
+    analytic = model.analytic
     force_sum = np.zeros((n, 2)) if exact else [[0, 0] for _ in range(n)]
     torque_sum = np.zeros(n) if exact else [0] * n
     shift_sum = np.zeros((n, 2)) if exact else [[0, 0] for _ in range(n)]
@@ -315,7 +342,6 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             if i == j or model.world[i] != model.world[j] or not owns(model.kind, i, j):
                 continue
             # In the owner's frame, as the kernel clips.
-            w = int(model.world[i])
             origin = state.pos[i]
             c = contact_force(
                 outline(model, state, i, origin),
@@ -327,23 +353,10 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 state.vel[j],
                 state.omega[j],
                 dt=dt,
-                k_e=float(model.k_e[w]),
-                k_v=float(model.k_v[w]),
-                ratio=float(model.ratio[w]),
-                law=model.laws[w],
-                inv_mass=(model.inv_mass(i), model.inv_mass(j)),
-                inv_inertia=(model.inv_inertia(i), model.inv_inertia(j)),
-                zeta=float(model.zeta[w]),
                 dvel=(state.dvel[i], state.dvel[j]),
                 domega=(float(state.domega[i]), float(state.domega[j])),
                 memory=state.contacts.get((i, j)),
-                method=model.method,
-                crushing_force=None
-                if model.crushing_force is None
-                else float(model.crushing_force[w]),
-                tol=model.tol,
-                analytic=analytic,
-                coupled=model.integrator == "coupled",
+                **model.pair(i, j),
             )
             if c is None:
                 continue  # no overlap: the pair's memory is dropped

@@ -178,7 +178,8 @@ def coupled_impulses(
     y_n, y_t, v_n, v_t = x_n, x_t, u_n, u_t
     p0_n = p0_t = q0_n = q0_t = v0 = 0.0
     for stage in range(2):
-        if stage == 1 or tau > 0.0:
+        # The step's flow is skipped where the force pulls at its start: handed over anyway.
+        if (stage == 1 and k_n * x_n + c_n * u_n >= 0.0) or (stage == 0 and tau > 0.0):
             # Stage 0, since onset: from no depth or stretch at the rates it had then; the
             # difference from the free flight to now is what the forces did. 1: the step.
             span, i_n, i_t, j_n, j_t = h, x_n, x_t, u_n, u_t

@@ -150,7 +150,7 @@ def coupled_impulses_ti(
     zero = 0.0 * h
     p0_n, p0_t, q0_n, q0_t, v0 = zero, zero, zero, zero, zero
     for stage in range(2):
-        if stage == 1 or tau > 0.0:
+        if (stage == 1 and k_n * x_n + c_n * u_n >= 0.0) or (stage == 0 and tau > 0.0):
             span, i_n, i_t, j_n, j_t = h, x_n, x_t, u_n, u_t
             if stage == 0:
                 span, i_n, i_t, j_n, j_t = tau, zero, zero, u_n - a_n * tau, u_t - a_t * tau

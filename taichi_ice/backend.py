@@ -16,7 +16,14 @@ in 5 s instead of 15, run as fast on small scenes (jammed pillar, 34 us a step e
 and within the noise on large fields (random box of 1e5 blocks: 0.88, 0.94 and 1.29 times
 the optimised throughput in three pairs), with bit-identical trajectories in the scenes
 checked (``tests/test_backend.py`` holds the two against each other). The test suite
-compiles this way; everything else compiles fully optimised unless asked.
+and the accuracy studies (``taichi-ice validate``, but its speed study) compile this way;
+everything else compiles fully optimised unless asked. Measured again with the contact
+integrators (issue 30; one sitting, 2 cores, empty cache, ``two_squares`` a thread per
+world): the first steps took 8.7 s with the passes and 1.3 s without (Euler), 26.6 s and
+2.1 s (analytic), 41.6 s and 2.6 s (coupled); stepping without them, three alternating pairs
+of processes, a world a thread: 1.03-1.18x the time at 1,000 blocks, 1.00-1.11x in the
+jammed pillar; a team of threads at 1e4 blocks: no difference beyond the VM's noise
+(0.69-1.45x).
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ _current: tuple[str, str] | None = None
 # The arch Taichi actually runs on ("cpu", "cuda", "vulkan", "metal"), read back after start.
 _actual: str | None = None
 _generation = 0  # Taichi starts in this process (``generation``)
+_optimized: bool | None = None  # the running Taichi's advanced passes (``optimized``)
 # Taichi's names of CPU archs: a GPU arch that fell back runs on one of these.
 _CPU_ARCHES = ("x64", "arm64", "cpu")
 # Seconds a child process may take to start Taichi on a GPU arch (import + driver start).
@@ -325,7 +333,7 @@ def init(
         ValueError: unknown arch or precision, or a different arch/precision than the
             running one without ``reinit``.
     """
-    global _current, _actual, _int_atomics_ok, _loops_ok, _generation
+    global _current, _actual, _int_atomics_ok, _loops_ok, _generation, _optimized
     if arch not in ARCHES:
         raise ValueError(f"arch must be one of {ARCHES}, got {arch!r}")
     real_dtype(precision)
@@ -340,6 +348,7 @@ def init(
         )
     import taichi as ti
 
+    advanced = optimize_default() if optimize is None else bool(optimize)
     with _quiet_start():
         ti.init(
             arch=getattr(ti, arch),
@@ -348,7 +357,7 @@ def init(
             log_level=ti.WARN,
             # Taichi's offline cache keys kernels by this setting (checked), so kernels
             # compiled one way are never loaded for the other.
-            advanced_optimization=optimize_default() if optimize is None else bool(optimize),
+            advanced_optimization=advanced,
             offline_cache=True,
             # Taichi's default cache holds 100 MB and, past it, drops the least recently used
             # quarter when a process ends. Kernels specialise on their batch's layout, and
@@ -372,6 +381,7 @@ def init(
             fast_math=False,
         )
     _current = wanted
+    _optimized = advanced
     _generation += 1
     _actual = _running_arch()
     spirv = _actual in SPIRV_ARCHES
@@ -411,6 +421,12 @@ def generation() -> int:
     """How many times this process has started Taichi: the fields (and Worlds) of an
     earlier start are freed (``init(..., reinit=True)``)."""
     return _generation
+
+
+def optimized() -> bool | None:
+    """Whether the running Taichi compiles with its advanced passes (``init``'s
+    ``optimize``), or None before ``init``."""
+    return _optimized
 
 
 def current() -> tuple[str, str] | None:

@@ -98,6 +98,10 @@ def _integrators(text: str) -> tuple[str, ...]:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.study != "speed_accuracy":  # it times kernels: compiled as the user says
+        from ..experiments.validation import compile_for_studies
+
+        compile_for_studies()
     study = importlib.import_module(f"taichi_ice.experiments.validation.{args.study}")
     if args.study == "dem_accuracy":
         if args.worker:

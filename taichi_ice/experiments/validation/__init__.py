@@ -30,10 +30,29 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
-__all__ = ["validate_command"]
+__all__ = ["compile_for_studies", "validate_command"]
+
+
+def compile_for_studies() -> bool:
+    """Let the accuracy studies compile without Taichi's advanced passes, unless the user
+    set ``TAICHI_ICE_OPTIMIZE``; returns the setting the user asked for (default: on).
+
+    The studies build dozens of layouts (integrators, laws, batches, precisions) for runs of
+    seconds: with the passes, compiling was most of ``validate --dem`` (issue 30: the coupled
+    step's kernels 41.6 s against 2.6 s without). Their results are the same bit for bit
+    (``tests/test_backend.py``); stepping is up to ~1.1x slower a world a thread, which the
+    studies' wall-time axes (``dem_accuracy``) record (``advanced_optimization``). Child
+    processes inherit the setting. The speed study times kernels: it asks for the user's.
+    """
+    from ... import backend
+
+    wanted = backend.optimize_default()
+    os.environ.setdefault(backend.OPTIMIZE_ENV, "0")
+    return wanted
 
 
 def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bool = False) -> int:
@@ -53,6 +72,7 @@ def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bo
 
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
+    optimize = compile_for_studies()
     start = time.perf_counter()
     single_interface.run(out_dir, quick=quick)
     rest_rules.run(out_dir)
@@ -61,7 +81,7 @@ def validate_command(out: str, speed: bool = False, quick: bool = False, dem: bo
     if speed:
         from . import speed_accuracy
 
-        speed_accuracy.run(out_dir, quick=quick)
+        speed_accuracy.run(out_dir, quick=quick, optimize=optimize)
     if dem:
         from . import contact_convergence, contact_coupling, dem_accuracy, dem_ensemble
 

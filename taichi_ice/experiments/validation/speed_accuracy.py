@@ -182,6 +182,7 @@ def worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[st
     return {
         "precision": precision,
         "arch": arch,
+        "advanced_optimization": backend.optimized(),
         "threads": os.cpu_count(),
         "runs": runs,
         "timings": timings,
@@ -189,9 +190,15 @@ def worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[st
     }
 
 
-def _run_worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[str, Any]:
+def _run_worker(
+    precision: str, arch: str, n_interfaces: int, quick: bool, optimize: bool | None
+) -> dict[str, Any]:
+    from ... import backend
+
     package_root = str(Path(__file__).resolve().parents[3])  # the folder holding taichi_ice/
     env = dict(os.environ)
+    if optimize is not None:
+        env[backend.OPTIMIZE_ENV] = "1" if optimize else "0"
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
@@ -227,6 +234,7 @@ def run(
     arch: str = "cpu",
     n_interfaces: int | None = None,
     precisions: tuple[str, ...] = ("f64", "f32"),
+    optimize: bool | None = None,
 ) -> dict[str, Any]:
     """Measure error against step and against wall time; write the chart and the JSON.
 
@@ -236,6 +244,9 @@ def run(
         arch: Taichi arch of the workers.
         n_interfaces: interfaces in the timing runs (default 1e6, or 1e4 when quick).
         precisions: the precisions to measure, each in its own process.
+        optimize: the workers compile with Taichi's advanced passes (None: as
+            ``TAICHI_ICE_OPTIMIZE`` says; ``validate`` passes the user's setting, since the
+            other studies compile without them: ``compile_for_studies``).
 
     Returns:
         The JSON summary as a dict.
@@ -247,7 +258,7 @@ def run(
     parts = []
     for precision in precisions:
         print(f"speed/accuracy: {precision} worker ({arch}, {n:.0e} interfaces) ...", flush=True)
-        parts.append(_run_worker(precision, arch, n, quick))
+        parts.append(_run_worker(precision, arch, n, quick, optimize))
     runs = [r for p in parts for r in p["runs"]]
     timings = [t for p in parts for t in p["timings"]]
     cost = {

@@ -16,6 +16,7 @@ import math
 
 import pytest
 
+from taichi_ice import backend
 from taichi_ice.commands.cli import main
 from taichi_ice.experiments.validation import collision_ode, dem_accuracy, dem_scenes
 from taichi_ice.tomlio import dump_toml
@@ -116,6 +117,9 @@ def test_quick_study_runs_and_its_collisions_match_the_ode(tmp_path):
         assert (tmp_path / name).stat().st_size > 0
     on_disk = json.loads((tmp_path / "dem_accuracy.json").read_text())
     assert set(on_disk) >= {"points", "orders", "timing", "collision_reference"}
+    # The wall times' kernels: compiled as this process's Taichi was (the suite: without
+    # the advanced passes, conftest).
+    assert on_disk["advanced_optimization"] == {"f64": backend.optimized()}
     points = summary["points"]
     checked = 0
     for p in points:

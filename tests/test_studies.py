@@ -115,3 +115,34 @@ def test_speed_accuracy_summary(validated):
     assert combos == {("f64", "taichi"), ("f64", "numpy"), ("f32", "taichi"), ("f32", "numpy")}
     for run in summary["runs"]:
         assert len(run["wall_s_per_interface"]) == len(run["dt"]) == len(run["max_error"])
+
+
+def test_the_studies_compile_without_the_advanced_passes_unless_the_user_asks(monkeypatch):
+    """``validate`` compiles its studies as the suite does (same bits, test_backend) unless
+    ``TAICHI_ICE_OPTIMIZE`` is set, and hands the speed study's workers the user's setting."""
+    import os
+    import subprocess
+    from types import SimpleNamespace
+
+    from taichi_ice.backend import OPTIMIZE_ENV
+    from taichi_ice.experiments.validation import compile_for_studies, speed_accuracy
+
+    monkeypatch.delenv(OPTIMIZE_ENV, raising=False)
+    assert compile_for_studies() is True  # what the user asked for: the default, on
+    assert os.environ[OPTIMIZE_ENV] == "0"  # what the studies (and their workers) get
+    monkeypatch.setenv(OPTIMIZE_ENV, "1")
+    assert compile_for_studies() is True and os.environ[OPTIMIZE_ENV] == "1"
+    monkeypatch.setenv(OPTIMIZE_ENV, "off")
+    assert compile_for_studies() is False and os.environ[OPTIMIZE_ENV] == "off"
+
+    seen = []
+
+    def fake_run(cmd, env, **kwargs):
+        seen.append(env.get(OPTIMIZE_ENV))
+        Path(cmd[cmd.index("--result") + 1]).write_text("{}")
+        return SimpleNamespace(returncode=0)
+
+    monkeypatch.setattr(subprocess, "run", fake_run)
+    for optimize in (True, False, None):
+        speed_accuracy._run_worker("f64", "cpu", 10, True, optimize)
+    assert seen == ["1", "0", "off"]  # None: the environment's, inherited

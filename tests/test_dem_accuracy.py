@@ -278,3 +278,50 @@ def test_quick_ensemble_runs_and_compares_on_the_same_layouts(tmp_path):
     assert key == "coulomb: euler 0.8 against euler 0.2"
     assert c["peak_force"]["n"] == 2 and isinstance(c["any_differs"], bool)
     assert summary["comparisons"][key]["any_differs"] == c["any_differs"]
+
+
+def test_the_ensemble_runs_the_cases_and_layouts_asked_for(tmp_path, capsys):
+    """``--cases`` keeps the comparisons among the cases run and refuses, in one line, a
+    case compared with nothing; ``--layouts`` sets how many layouts each case runs."""
+    from taichi_ice.commands import validate
+    from taichi_ice.errors import UsageError
+    from taichi_ice.experiments.validation import dem_ensemble
+
+    cases, comparisons = dem_ensemble.select(
+        dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("euler", 0.2), ("coupled", 0.8)]
+    )
+    assert cases == (("euler", 0.2), ("coupled", 0.8))
+    assert comparisons == ((("coupled", 0.8), ("euler", 0.2)),)
+    _, three = dem_ensemble.select(
+        dem_ensemble.CASES,
+        dem_ensemble.COMPARISONS,
+        [("euler", 0.2), ("coupled", 0.2), ("coupled", 0.8)],
+    )
+    assert set(three) == {
+        (("coupled", 0.2), ("euler", 0.2)),
+        (("coupled", 0.8), ("euler", 0.2)),
+        (("coupled", 0.8), ("coupled", 0.2)),
+    }
+    with pytest.raises(UsageError, match=r"coupled:0\.8 would be compared with no other"):
+        dem_ensemble.select(dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("coupled", 0.8)])
+    for argv, said in (
+        (["--cases", "coupled:0.8"], "coupled:0.8 would be compared with no other case run"),
+        (["--cases", "verlet:0.2,euler:0.2"], "case 'verlet:0.2': write INTEGRATOR:RATIO"),
+        (["--layouts", "1"], "--layouts: at least 2"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            validate.main(["dem_ensemble", "--out", str(tmp_path / "unused"), *argv])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert said in err and "Traceback" not in err
+    assert not (tmp_path / "unused").exists()  # refused before anything ran
+
+    summary = dem_ensemble.run(
+        tmp_path, quick=True, layouts=3, cases=[("euler", 0.2), ("euler", 0.8)], log=lambda _: None
+    )
+    assert summary["settings"]["layouts"] == 3
+    runs = summary["runs"]
+    assert len(runs) == 2 and all(len(r["seeds"]) == 3 for r in runs)
+    assert runs[0]["seeds"] == runs[1]["seeds"]
+    ((key, c),) = summary["comparisons"].items()
+    assert key == "coulomb: euler 0.8 against euler 0.2" and c["peak_force"]["n"] == 3

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 from pathlib import Path
 
 STUDIES = (
@@ -74,6 +75,22 @@ def build_parser() -> argparse.ArgumentParser:
                 action="store_true",
                 help="keep the cases already in --out/dem_ensemble.json, run only the others",
             )
+            p.add_argument(
+                "--layouts",
+                type=int,
+                default=None,
+                metavar="N",
+                help="layouts of the pillar scene per case (default 32; --quick 2): the "
+                "intervals narrow as 1/sqrt(N), the runs take N/32 as long",
+            )
+            p.add_argument(
+                "--cases",
+                type=_cases,
+                default=None,
+                metavar="LIST",
+                help="only these cases, INTEGRATOR:RATIO comma-separated (dt / stable_dt), "
+                "and the comparisons among them, e.g. 'euler:0.2,coupled:0.8' (default: all)",
+            )
         if name == "speed_accuracy":
             p.add_argument("--arch", default="cpu", help="Taichi arch (cpu or gpu)")
             p.add_argument("--interfaces", type=int, default=None, help="interfaces timed")
@@ -96,8 +113,30 @@ def _integrators(text: str) -> tuple[str, ...]:
     return names
 
 
+def _cases(text: str) -> tuple[tuple[str, float], ...]:
+    from ..engine.options import INTEGRATORS
+
+    out = []
+    for item in (x.strip() for x in text.split(",") if x.strip()):
+        name, _, ratio = item.partition(":")
+        try:
+            value = float(ratio)
+        except ValueError:
+            value = math.nan
+        if name not in INTEGRATORS or not value > 0.0:
+            raise argparse.ArgumentTypeError(
+                f"case {item!r}: write INTEGRATOR:RATIO, the integrator one of "
+                f"{', '.join(INTEGRATORS)} and RATIO = dt / stable_dt > 0, e.g. coupled:0.8"
+            )
+        out.append((name, value))
+    if not out:
+        raise argparse.ArgumentTypeError("no case given: e.g. --cases euler:0.2,coupled:0.8")
+    return tuple(out)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     if args.study != "speed_accuracy":  # it times kernels: compiled as the user says
         from ..experiments.validation import compile_for_studies
 
@@ -116,7 +155,22 @@ def main(argv: list[str] | None = None) -> int:
                 integrators=args.integrators,
             )
     elif args.study == "dem_ensemble":
-        study.run(args.out, quick=args.quick, reuse=args.reuse)
+        from ..errors import UsageError
+
+        try:  # a case compared with nothing: one line, before anything runs
+            table = (
+                study.QUICK
+                if args.quick
+                else {"cases": study.CASES, "comparisons": study.COMPARISONS}
+            )
+            study.select(table["cases"], table["comparisons"], args.cases)
+            if args.layouts is not None and args.layouts < 2:
+                raise UsageError(f"--layouts: at least 2 (a paired interval), got {args.layouts}")
+        except UsageError as exc:
+            parser.error(str(exc))
+        study.run(
+            args.out, quick=args.quick, reuse=args.reuse, layouts=args.layouts, cases=args.cases
+        )
     elif args.study == "speed_accuracy":
         if args.worker:
             n = args.interfaces or (study.QUICK_N_INTERFACES if args.quick else study.N_INTERFACES)

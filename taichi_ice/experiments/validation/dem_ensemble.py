@@ -266,11 +266,48 @@ def plot(summary: dict[str, Any], path: Path) -> None:
     fig.savefig(path, dpi=75)
 
 
-def run(out_dir: str | Path, quick: bool = False, reuse: bool = False, log=print) -> dict[str, Any]:
+def select(cases, comparisons, wanted) -> tuple[tuple, tuple]:
+    """The cases ``wanted`` (``(integrator, ratio)`` pairs, in their order) and the
+    comparisons of ``comparisons`` whose two cases are both among them; ``wanted`` None
+    keeps everything.
+
+    Raises:
+        UsageError: a wanted case that no comparison of the study holds against another
+            run case (it would be run and compared with nothing).
+    """
+    from ...errors import UsageError
+
+    if wanted is None:
+        return tuple(cases), tuple(comparisons)
+    wanted = tuple((i, float(r)) for i, r in wanted)
+    every = {c for pair in comparisons for c in pair}
+    kept = tuple((a, b) for a, b in comparisons if a in wanted and b in wanted)
+    compared = {c for pair in kept for c in pair}
+    alone = [f"{i}:{r:g}" for i, r in wanted if (i, r) not in compared]
+    if alone:
+        known = ", ".join(f"{i}:{r:g}" for i, r in sorted(every))
+        raise UsageError(
+            f"dem_ensemble --cases: {', '.join(alone)} would be compared with no other case "
+            f"run; the comparisons hold these against each other: {known} (e.g. --cases "
+            "euler:0.2,coupled:0.8)"
+        )
+    return wanted, kept
+
+
+def run(
+    out_dir: str | Path,
+    quick: bool = False,
+    reuse: bool = False,
+    log=print,
+    layouts: int | None = None,
+    cases=None,
+) -> dict[str, Any]:
     """Every case of every law, the comparisons, ``dem_ensemble.json`` and ``.png``.
 
     ``reuse``: keep the runs of an earlier ``dem_ensemble.json`` in ``out_dir`` made with the
-    same layouts and length, and run only the cases it lacks.
+    same layouts and length, and run only the cases it lacks. ``layouts``: how many (default
+    ``LAYOUTS``; quick 2): the paired intervals narrow as 1/sqrt(layouts). ``cases``: run only
+    these ``(integrator, dt / stable_dt)`` and the comparisons among them (``select``).
     """
     from ... import backend
 
@@ -287,6 +324,15 @@ def run(out_dir: str | Path, quick: bool = False, reuse: bool = False, log=print
             "comparisons": COMPARISONS,
         }
     )
+    if layouts is not None:
+        if layouts < 2:
+            from ...errors import UsageError
+
+            raise UsageError(
+                f"dem_ensemble --layouts: at least 2 (a paired interval), got {layouts}"
+            )
+        cfg["layouts"] = int(layouts)
+    cfg["cases"], cfg["comparisons"] = select(cfg["cases"], cfg["comparisons"], cases)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "dem_ensemble.json"

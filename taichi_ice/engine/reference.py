@@ -85,6 +85,9 @@ class ReferenceModel:
         c_air: ``(N,)`` wind drag coefficients (kg/m), or None without wind.
         coriolis: ``(W,)`` Coriolis parameters (1/s), or None. tilt: the current is
             geostrophic (its sea-surface tilt pushes the floes).
+        midstep: the analytic and coupled steps linearise each contact about the
+            configuration predicted for mid-step (``reference_contact.contact_force``'s
+            ``mid``; issue 30's prototype, in this twin only: no kernel runs it yet).
     """
 
     kind: np.ndarray
@@ -111,6 +114,7 @@ class ReferenceModel:
     c_air: np.ndarray | None = None
     coriolis: np.ndarray | None = None
     tilt: bool = False
+    midstep: bool = False
 
     @property
     def n_bodies(self) -> int:
@@ -337,6 +341,12 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
         return f, float(torques[i]) * model.quantum
 
     contacts: dict[tuple[int, int], ContactMemory] = {}
+    # The configuration predicted for mid-step (``model.midstep``): free flight for h/2.
+    mid = None
+    if analytic and model.midstep:
+        mid = state.copy()
+        mid.pos = state.pos + 0.5 * dt * state.vel
+        mid.angle = state.angle + 0.5 * dt * state.omega
     for i in range(n):
         for j in range(n):
             if i == j or model.world[i] != model.world[j] or not owns(model.kind, i, j):
@@ -356,6 +366,14 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 dvel=(state.dvel[i], state.dvel[j]),
                 domega=(float(state.domega[i]), float(state.domega[j])),
                 memory=state.contacts.get((i, j)),
+                mid=None
+                if mid is None
+                else (
+                    outline(model, mid, i, origin),
+                    outline(model, mid, j, origin),
+                    mid.pos[i] - origin,
+                    mid.pos[j] - origin,
+                ),
                 **model.pair(i, j),
             )
             if c is None:

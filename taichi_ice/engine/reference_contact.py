@@ -148,6 +148,7 @@ def contact_force(
     tol: float = NEWTON_TOLERANCE["f64"],
     analytic: bool = False,
     coupled: bool = False,
+    mid: tuple | None = None,
 ) -> ContactForce | None:
     """NumPy reference of ``ContactStage.pair``: the contact between an owner and a partner.
 
@@ -183,6 +184,17 @@ def contact_force(
             (``contact_coupled.coupled_impulses``, the ``coupled`` integrator), told the
             cross term of the pair's inverse mass and the friction it would slide at (the
             Coulomb mu, or rate and state's mu0: its mu is solved after the impulses).
+        mid: with ``analytic``, ``(p, q, pos_owner, pos_partner)`` at the configuration
+            predicted for mid-step (``reference_step`` with ``ReferenceModel.midstep``: each
+            body in free flight for h/2), in the frame of ``p``. Where the outlines overlap
+            there too, the contact is linearised about that configuration: its normal,
+            point, width and lever arms, hence the force's direction, its torques and the
+            pair's inverse masses, are the mid-step's, and the flow starts from the
+            approach and slip of the step's velocities at the mid-step point and from the
+            depth the mid-step overlap less h/2 of that approach. Held at the step's start
+            instead, they are a first-order error of the spin and the contact's duration
+            even without friction (docs/accuracy.md, issue 30; a prototype: no kernel
+            runs it yet).
 
     Returns:
         A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the
@@ -200,6 +212,21 @@ def contact_force(
     tangent = np.array([-normal[1], normal[0]])
     approach = -float(v_rel @ normal)
     slip = float(v_rel @ tangent)
+    # The mid-step linearisation (``mid``): where the outlines still overlap at mid-step.
+    depth_area, shift_back = area, 0.0
+    if analytic and mid is not None:
+        om = overlap(mid[0], mid[1])
+        if om.area > 0.0:
+            point, normal, width = om.centroid, om.normal, om.width
+            r_i = point - np.asarray(mid[2], dtype=np.float64)
+            r_j = point - np.asarray(mid[3], dtype=np.float64)
+            v_rel = (np.asarray(vel_partner, dtype=np.float64) + _spin(omega_partner, r_j)) - (
+                np.asarray(vel_owner, dtype=np.float64) + _spin(omega_owner, r_i)
+            )
+            tangent = np.array([-normal[1], normal[0]])
+            approach = -float(v_rel @ normal)
+            slip = float(v_rel @ tangent)
+            depth_area, shift_back = om.area, 0.5 * dt * approach
     old = memory if memory is not None else ContactMemory()
     cap_n, crushed = math.inf, old.crushed
     if crushing_force is not None:
@@ -245,7 +272,7 @@ def contact_force(
                 float(law) if isinstance(law, (int, float)) else law.contact_row()["mu0"],
             )
         f_n, f_el, q_n, p_t, q_t, xi1, a_n, a_t = solve(
-            max(area - crushed, 0.0) / width,
+            max(depth_area - crushed, 0.0) / width - shift_back,
             approach,
             slip,
             old.xi,

@@ -13,8 +13,14 @@ the step. This study runs both in the NumPy twin of the step (``engine.reference
   spring); with it the offset collision's restitution is 2 % off apart at 0.8 stable_dt
   and 0.2 % together;
 - a loaded ``stack`` of three turning blocks between a wall and a pusher (two contacts a
-  block), each solve against itself at 0.05 stable_dt, to 2.0: together is no closer (a
-  block with several contacts takes the others' forces from the last step either way).
+  block), each solve against itself at 0.05 stable_dt, to 2.0: together is no closer.
+
+Both hold each contact's geometry (normal, point, lever arms) at the step's start while the
+bodies turn: a first-order error of the spin and the duration even without friction. The
+third solve, ``midstep`` (the coupled one linearised about the configuration predicted for
+mid-step, ``ReferenceModel.midstep``; a prototype in the twin, no kernel runs it yet), is
+second order on the offset collision without friction (order 2.1-2.4 in restitution,
+duration and spin) and closer in the stack's velocities.
 
 ``python -m taichi_ice.commands.validate contact_coupling --out DIR [--quick]`` writes
 ``contact_coupling.json``, ``contact_coupling.md`` and ``contact_coupling.png``
@@ -56,9 +62,11 @@ CASES = (
     ("offset", dem_scenes.OFFSET, "rate-state"),
     ("offset", dem_scenes.OFFSET, "frictionless"),
 )
-# The analytic integrator's solve (``contact_step.pair_impulses``, apart) and the coupled
-# one's (``contact_coupled.coupled_impulses``, together).
-SOLVERS = ("decoupled", "coupled")
+# The analytic integrator's solve (``contact_step.pair_impulses``, apart), the coupled
+# one's (``contact_coupled.coupled_impulses``, together), and the coupled one linearised about
+# the configuration predicted for mid-step (``ReferenceModel.midstep``: a prototype in the
+# twin only).
+SOLVERS = ("decoupled", "coupled", "midstep")
 MEASURES = ("restitution", "duration", "spin")
 # The loaded stack: three squares between a wall and a pusher (``stack``), 0.25 s.
 STACK_BLOCKS = 3
@@ -78,18 +86,26 @@ def _scene(offset: float, law: str):
     return dem_scenes.collision(offset, law)
 
 
+def _model(scenes, solver: str):
+    """The twin's model of ``scenes`` for ``solver`` (one of ``SOLVERS``), summing in float."""
+    from ...engine.reference import ReferenceModel
+
+    return dataclasses.replace(
+        ReferenceModel.from_scenes(scenes),
+        integrator="analytic" if solver == "decoupled" else "coupled",
+        midstep=solver == "midstep",
+        quantum=None,
+    )
+
+
 def simulate(scene, dt: float, solver: str):
     """The collision in the NumPy twin of the analytic step, ``solver`` its pair solve;
     returns the final ``ReferenceState`` and the time it reached."""
-    from ...engine.reference import ReferenceModel, ReferenceState, reference_step
+    from ...engine.reference import ReferenceState, reference_step
 
     end = dem_scenes.COLLISION_END
     batch = [dem_scenes.with_step(scene, dt, end)]
-    model = dataclasses.replace(
-        ReferenceModel.from_scenes(batch),
-        integrator="analytic" if solver == "decoupled" else "coupled",
-        quantum=None,
-    )
+    model = _model(batch, solver)
     state = ReferenceState.from_scenes(batch)
     steps = round(end / dt)
     for _ in range(steps):
@@ -137,17 +153,13 @@ def run_stack(ratios, duration: float = STACK_DURATION) -> list[dict[str, Any]]:
     """The stack at each step and solve, against the same solve at ``STACK_REFERENCE``:
     the largest error of a block's position (m) and velocity (m/s) at the end, or the time
     it diverged (a speed above 50 m/s or not finite)."""
-    from ...engine.reference import ReferenceModel, ReferenceState, reference_step
+    from ...engine.reference import ReferenceState, reference_step
 
     scene = stack(duration)
 
     def one(ratio: float, solver: str):
         dt = ratio * scene.stable_dt
-        model = dataclasses.replace(
-            ReferenceModel.from_scenes([scene]),
-            integrator="analytic" if solver == "decoupled" else "coupled",
-            quantum=None,
-        )
+        model = _model([scene], solver)
         state = ReferenceState.from_scenes([scene])
         for i in range(round(duration / dt)):
             state = reference_step(state, model, dt)
@@ -304,7 +316,7 @@ def table(result: dict) -> str:
 
 def chart(result: dict, path: Path) -> Path:
     """Restitution, duration and spin error against the step, each case; solid coupled,
-    dashed decoupled (the kernels')."""
+    dashed decoupled (the kernels'), dotted the mid-step prototype."""
     from ...run.plots import save_figure, subplots
 
     ratios = np.array(result["ratios"])
@@ -312,7 +324,7 @@ def chart(result: dict, path: Path) -> Path:
     colours = dict(zip([f"{n}/{law}" for n, _, law in CASES], ("C0", "C1", "C2", "C3")))
     for ax, m in zip(axes[:3], MEASURES):
         for name, _, law in CASES:
-            for solver, style in zip(SOLVERS, ("--", "-")):
+            for solver, style in zip(SOLVERS, ("--", "-", ":")):
                 e = [error_of(result, name, law, solver, m, r) for r in ratios]
                 e = np.array([np.nan if v is None else max(v, 1e-12) for v in e])
                 ax.loglog(
@@ -330,7 +342,7 @@ def chart(result: dict, path: Path) -> Path:
     axes[0].set_ylabel("relative error against the ODE")
     axes[0].legend(fontsize=7)
     ax = axes[3]
-    for solver, style in zip(SOLVERS, ("--", "-")):
+    for solver, style in zip(SOLVERS, ("--", "-", ":")):
         rows = [r for r in result["stack"] if r["solver"] == solver and "error" in r]
         ax.loglog(
             [r["ratio"] for r in rows],

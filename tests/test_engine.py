@@ -210,6 +210,8 @@ def two_squares(gap: float = 1e-3, v_left: float = 0.7, v_right: float = -0.3):
         ("coulomb", False, "analytic"),
         ("rate-state", True, "analytic"),
         ("rate-state", True, "coupled"),
+        ("coulomb", False, "midstep"),
+        ("rate-state", True, "midstep"),
     ],
 )
 def test_world_matches_numpy_reference_step(f64, law, water, integrator):
@@ -624,7 +626,7 @@ def pushed_field(duration=1.0):
     return scene_from_dict(raw)
 
 
-@pytest.mark.parametrize("integrator", ["euler", "analytic", "coupled"])
+@pytest.mark.parametrize("integrator", ["euler", "analytic", "coupled", "midstep"])
 def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision, integrator):
     """Work in = kinetic + elastic + friction + viscous + drag + severed, up to O(dt), with
     every integrator.
@@ -702,6 +704,8 @@ def assert_same_motion(a: World, b: World) -> None:
         ("bodies", "analytic"),
         ("worlds", "coupled"),
         ("bodies", "coupled"),
+        ("worlds", "midstep"),
+        ("bodies", "midstep"),
     ],
 )
 def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping, integrator):
@@ -789,6 +793,7 @@ def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
         ("rate-state", "euler"),
         ("rate-state", "analytic"),
         ("rate-state", "coupled"),
+        ("rate-state", "midstep"),
     ],
 )
 def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law, integrator):

@@ -63,7 +63,6 @@ from ..physics.contact_law_ti import (
     crush_ti,
     inverse_mass_along_ti,
     normal_force_ti,
-    perp,
     tangential_damping_ti,
     tangential_force_ti,
 )
@@ -72,7 +71,6 @@ from ..physics.polygon_ti import facing_gap_ti, overlap_normals_ti
 from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE
 from ..physics.slip_ti import contact_friction_ti
 from .contact_lists import ContactLists
-from .gather import gather
 from .schema import Layout, contact_columns, law_columns
 from .stages import Access
 from .state import Data, Model
@@ -106,6 +104,7 @@ class ContactStage(ContactLists):
                 "time_step",
                 "body_pos",
                 "body_rot",
+                "body_angle",  # the midstep integrator's predicted turn
                 "body_vel",
                 "body_omega",
                 "contact_count",
@@ -208,17 +207,6 @@ class ContactStage(ContactLists):
         self.maxv = layout.max_verts
 
     @ti.func
-    def add_force(self, i, force, torque, serial: ti.template()):
-        """Add a contact's force and torque to body i (``state.gather``)."""
-        gather(self.data.body_force_q, self.data.body_torque_q, i, force, torque, serial)
-
-    @ti.func
-    def add_shift(self, i, shift, torque, serial: ti.template()):
-        """Add a contact's position impulse (as a force, 2 Q / dt^2) and its torque to body
-        i (``state.gather``; the analytic step)."""
-        gather(self.data.body_shift_q, self.data.body_turn_q, i, shift, torque, serial)
-
-    @ti.func
     def pair(
         self,
         i,
@@ -269,12 +257,19 @@ class ContactStage(ContactLists):
             k_e, k_v = m.world_contact_stiffness[w], m.world_contact_viscosity[w]
             # point is relative to body i
             r_i, r_j = point, point + ti.cast(xi_ - xj_, self.layout.real)
-            v_rel = (d.body_vel[j] + perp(d.body_omega[j], r_j)) - (
-                d.body_vel[i] + perp(d.body_omega[i], r_i)
-            )
+            v_rel = self.relative(i, j, r_i, r_j, d.body_vel, d.body_omega)
             tangent = ti.Vector([-normal[1], normal[0]])
             approach = -v_rel.dot(normal)
             slip = v_rel.dot(tangent)
+            depth_area, shift_back = area, 0.0 * area
+            if ti.static(self.layout.midstep):  # linearised at mid-step (``reference_contact``)
+                a_m, p_m, n_m, w_m, c_i, c_j = self.midstep_overlap(i, j, xi_, dt)
+                if a_m > 0.0:
+                    point, normal, width, r_i, r_j = p_m, n_m, w_m, p_m - c_i, p_m - c_j
+                    v_rel = self.relative(i, j, r_i, r_j, d.body_vel, d.body_omega)
+                    tangent = ti.Vector([-normal[1], normal[0]])
+                    approach, slip = -v_rel.dot(normal), v_rel.dot(tangent)
+                    depth_area, shift_back = a_m, 0.5 * dt * approach
 
             # Normal: elastic on the overlap not crushed; with a strength, the overlap beyond
             # the cap is crushed (kept, not recovered) and its work is booked.
@@ -303,9 +298,7 @@ class ContactStage(ContactLists):
             # the energy's booking velocity, and the analytic step's other forces.
             rel_change = ti.Vector([0.0, 0.0], self.layout.real)
             if ti.static(self.layout.velocity_changes):
-                rel_change = (d.body_dvel[j] + perp(d.body_domega[j], r_j)) - (
-                    d.body_dvel[i] + perp(d.body_domega[i], r_i)
-                )
+                rel_change = self.relative(i, j, r_i, r_j, d.body_dvel, d.body_domega)
             # The analytic step: the normal and the stuck tangential spring-dashpot solved
             # over the step, apart (``contact_step_ti``) or together (``coupled``,
             # ``contact_coupled_ti``), the mean forces f and the position impulses g (2 Q /
@@ -326,8 +319,11 @@ class ContactStage(ContactLists):
                 )
                 exact = width > 0.0 and inv_n > 0.0 and inv_t > 0.0
                 if exact:
+                    depth = ti.max(area - crushed_new, 0.0) / width
+                    if ti.static(self.layout.midstep):
+                        depth = ti.max(depth_area - crushed_new, 0.0) / width - shift_back
                     args = (
-                        ti.max(area - crushed_new, 0.0) / width, approach, slip, xi, fresh,
+                        depth, approach, slip, xi, fresh,
                         -rel_change.dot(normal), rel_change.dot(tangent), last_force, dt,
                         k_e * width, k_v * width, k_t, c_t, inv_n, inv_t,
                     )  # fmt: skip

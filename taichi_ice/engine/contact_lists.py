@@ -4,7 +4,9 @@
 body's shape into place (``outline``, ``normals``), decide which body of a pair handles it
 (``wants``: the ownership rules told in ``contact``), cheaply reject pairs that cannot touch
 (``near``, ``beyond_a_face``, ``gap_bound``), and rebuild each body's neighbour list from the
-spatial hash (the kernel ``build_lists``). The forces of the pairs found, and the contacts'
+spatial hash (the kernel ``build_lists``); and the small pieces of a pair's contact the
+stage's ``pair`` calls (``relative`` velocities, ``midstep_overlap``, the gathers
+``add_force`` and ``add_shift``). The forces of the pairs found, and the contacts'
 memory, are ``contact.ContactStage``'s; it declares what both halves' kernels read and write
 (``ContactStage.ACCESS``).
 """
@@ -15,7 +17,10 @@ import taichi as ti
 
 from .. import backend
 from ..codes import BodyKind, Status
+from ..physics.contact_law_ti import perp
+from ..physics.polygon_ti import overlap_normals_ti, rotation_ti
 from .broadphase import bucket_of
+from .gather import gather
 from .stages import Stage
 
 # Round-off allowance of a gap that lets a pair be skipped (``ContactStage.gap_bound``), as
@@ -59,11 +64,14 @@ class ContactLists(Stage):
         ``vert_local``) turned by the body's rotation, plus ``shift`` if ``shifted``, in a
         (MAXV, 2) matrix. Unrolled to the largest outline, so that the matrix's indices are
         constants (``polygon_ti._min_penetration_axis_ti`` says why)."""
-        m, d = ti.static((self.model, self.data))
+        rot = self.data.body_rot[i]
+        return self.turned_by(i, local, shift, shifted, rot[0], rot[1])
+
+    @ti.func
+    def turned_by(self, i, local: ti.template(), shift, shifted: ti.template(), c, s):
+        """``turned`` by the rotation (``c``, ``s``) = (cos, sin) of another angle."""
         out = ti.Matrix.zero(self.layout.real, self.maxv, 2)
-        rot = d.body_rot[i]
-        c, s = rot[0], rot[1]
-        start, count = m.body_local_start[i], m.body_vert_count[i]
+        start, count = self.model.body_local_start[i], self.model.body_vert_count[i]
         for k in ti.static(range(self.maxv)):
             if k < count:
                 v = local[start + k]
@@ -74,6 +82,52 @@ class ContactLists(Stage):
                     out[k, 0] = c * v[0] - s * v[1]
                     out[k, 1] = s * v[0] + c * v[1]
         return out
+
+    @ti.func
+    def add_force(self, i, force, torque, serial: ti.template()):
+        """Add a contact's force and torque to body i (``state.gather``)."""
+        gather(self.data.body_force_q, self.data.body_torque_q, i, force, torque, serial)
+
+    @ti.func
+    def add_shift(self, i, shift, torque, serial: ti.template()):
+        """Add a contact's position impulse (as a force, 2 Q / dt^2) and its torque to body
+        i (``state.gather``; the analytic step)."""
+        gather(self.data.body_shift_q, self.data.body_turn_q, i, shift, torque, serial)
+
+    @ti.func
+    def relative(self, i, j, r_i, r_j, vel: ti.template(), omega: ti.template()):
+        """``vel`` and ``omega`` (the bodies' velocities, or their last changes) of body j's
+        point at r_j relative to body i's point at r_i."""
+        return (vel[j] + perp(omega[j], r_j)) - (vel[i] + perp(omega[i], r_i))
+
+    @ti.func
+    def midstep_overlap(self, i, j, origin, h):
+        """Bodies i and j at the configuration predicted for mid-step, each in free flight
+        for h/2 (``midstep`` integrator): their overlap's area, point, normal and width
+        relative to ``origin`` (the owner's position at the step's start), and where their
+        centroids are then; the ``mid`` of ``reference_contact.contact_force``."""
+        m, d = ti.static((self.model, self.data))
+        zero = ti.Vector([0.0, 0.0], self.layout.real)
+        c_i = ti.cast(d.body_pos[i] + 0.5 * h * d.body_vel[i] - origin, self.layout.real)
+        c_j = ti.cast(d.body_pos[j] + 0.5 * h * d.body_vel[j] - origin, self.layout.real)
+        rot_i = self.rotation(d.body_angle[i] + 0.5 * h * d.body_omega[i])
+        rot_j = self.rotation(d.body_angle[j] + 0.5 * h * d.body_omega[j])
+        p = self.turned_by(i, m.vert_local, c_i, True, rot_i[0], rot_i[1])
+        p_normals = self.turned_by(i, m.vert_normal_local, zero, False, rot_i[0], rot_i[1])
+        q = self.turned_by(j, m.vert_local, c_j, True, rot_j[0], rot_j[1])
+        n_p, n_q = m.body_vert_count[i], m.body_vert_count[j]
+        area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
+        return area, point, normal, width, c_i, c_j
+
+    @ti.func
+    def rotation(self, angle):
+        """(cos, sin) of ``angle`` as ``integrate.Integrator.turn`` computes a body's."""
+        rot = ti.Vector([0.0, 0.0], self.layout.real)
+        if ti.static(self.layout.precision == "f64"):
+            rot = rotation_ti(angle)
+        else:
+            rot = ti.Vector([ti.cos(angle), ti.sin(angle)])
+        return rot
 
     @ti.func
     def owns(self, i, j):

@@ -30,8 +30,11 @@ STEPPINGS = ("auto", "worlds", "bodies")
 # contact forces of the step's start (first order); "analytic", each contact's spring-dashpot
 # integrated exactly over the step (``physics.contact_step``; second order); "coupled", the
 # analytic step with each contact's normal and tangent solved together over the step
-# (``physics.contact_coupled``: the bodies' turning couples them).
-INTEGRATORS = ("euler", "analytic", "coupled")
+# (``physics.contact_coupled``: the bodies' turning couples them); "midstep", the coupled
+# step with each contact linearised about the configuration predicted for mid-step (its
+# normal, point and lever arms: held at the step's start they are a first-order error of the
+# bodies' turn; ``reference_contact.contact_force``'s ``mid``).
+INTEGRATORS = ("euler", "analytic", "coupled", "midstep")
 # Contact slots per body: DEFAULT_SMALL_SLOTS, plus one for each large body of its world (a
 # wall, a pusher) up to LARGE_SLOTS. A body owns its contacts with small bodies of higher id
 # and with large bodies. Measured with 6 slots, checked at every step (the overflow status):
@@ -66,7 +69,7 @@ class Options:
             (parallel over bodies: large worlds) or "auto" (``world.auto_stepping``).
         energy: keep the energy budget; off, trajectories are the same bit for bit and the
             step neither computes nor stores its terms (``schema.Layout.energy``).
-        integrator: "euler", "analytic" or "coupled" (``INTEGRATORS``): compiled in
+        integrator: "euler", "analytic", "coupled" or "midstep" (``INTEGRATORS``): compiled in
             (``schema.Layout.integrator``).
     """
 

@@ -78,16 +78,13 @@ class ReferenceModel:
         crushing_force: ``(W,)`` strength x thickness (N/m), or None.
         tol: Newton's tolerance of the sliding rate.
         quantum: force resolution of the gather (N); None sums in floating point.
-        integrator: "euler", "analytic" or "coupled" (``options.INTEGRATORS``).
+        integrator: "euler", "analytic", "coupled" or "midstep" (``options.INTEGRATORS``).
         current, wind: ``(W, 2)`` uniform current and wind (m/s), or None.
         current_grid, wind_grid: ``(values, origin, spacing)`` of a gridded one
             (``forcing.grid_sample``), or None.
         c_air: ``(N,)`` wind drag coefficients (kg/m), or None without wind.
         coriolis: ``(W,)`` Coriolis parameters (1/s), or None. tilt: the current is
             geostrophic (its sea-surface tilt pushes the floes).
-        midstep: the analytic and coupled steps linearise each contact about the
-            configuration predicted for mid-step (``reference_contact.contact_force``'s
-            ``mid``; issue 30's prototype, in this twin only: no kernel runs it yet).
     """
 
     kind: np.ndarray
@@ -114,7 +111,6 @@ class ReferenceModel:
     c_air: np.ndarray | None = None
     coriolis: np.ndarray | None = None
     tilt: bool = False
-    midstep: bool = False
 
     @property
     def n_bodies(self) -> int:
@@ -123,7 +119,13 @@ class ReferenceModel:
     @property
     def analytic(self) -> bool:
         """Contacts solved over the step, apart or together (``schema.Layout.analytic``)."""
-        return self.integrator in ("analytic", "coupled")
+        return self.integrator in ("analytic", "coupled", "midstep")
+
+    @property
+    def midstep(self) -> bool:
+        """Each contact linearised about the configuration predicted for mid-step
+        (``reference_contact.contact_force``'s ``mid``; ``schema.Layout.midstep``)."""
+        return self.integrator == "midstep"
 
     def current_at(self, i: int, pos, t: float) -> np.ndarray:
         """The current at body i's centroid ``pos`` at time ``t`` (m/s)."""
@@ -160,7 +162,7 @@ class ReferenceModel:
             else float(self.crushing_force[w]),
             "tol": self.tol,
             "analytic": self.analytic,
-            "coupled": self.integrator == "coupled",
+            "coupled": self.integrator in ("coupled", "midstep"),
         }
 
     @classmethod

@@ -193,8 +193,7 @@ def contact_force(
             approach and slip of the step's velocities at the mid-step point and from the
             depth the mid-step overlap less h/2 of that approach. Held at the step's start
             instead, they are a first-order error of the spin and the contact's duration
-            even without friction (docs/accuracy.md, issue 30; a prototype: no kernel
-            runs it yet).
+            even without friction (docs/accuracy.md, issue 30; the ``midstep`` integrator).
 
     Returns:
         A :class:`ContactForce` (its ``point`` in the frame of ``p``), or None if the

@@ -346,7 +346,7 @@ class Layout:
             energy, ``world_energy``); off, no kernel computes or stores a term of it, and
             the samples' energy columns are NaN.
         nbr_len: entries of a body's neighbour list.
-        integrator: how the step moves the bodies, "euler", "analytic" or "coupled"
+        integrator: how the step moves the bodies, "euler", "analytic", "coupled" or "midstep"
             (``options.INTEGRATORS``).
         current, wind, coriolis: an ocean current (``[water] current``), the wind's drag
             (``[wind]``), the Coriolis force (``[coriolis]``) are compiled in; without them
@@ -410,15 +410,21 @@ class Layout:
     @property
     def analytic(self) -> bool:
         """Each contact's spring-dashpot is integrated exactly over the step
-        (``integrator = "analytic"`` or ``"coupled"``): its position impulses are gathered
-        too."""
-        return self.integrator in ("analytic", "coupled")
+        (``integrator`` "analytic", "coupled" or "midstep"): its position impulses are
+        gathered too."""
+        return self.integrator in ("analytic", "coupled", "midstep")
 
     @property
     def coupled(self) -> bool:
         """The analytic step with a contact's normal and tangent solved together
-        (``integrator = "coupled"``, ``physics.contact_coupled``)."""
-        return self.integrator == "coupled"
+        (``integrator`` "coupled" or "midstep", ``physics.contact_coupled``)."""
+        return self.integrator in ("coupled", "midstep")
+
+    @property
+    def midstep(self) -> bool:
+        """The coupled step with each contact linearised about the configuration predicted
+        for mid-step (``integrator = "midstep"``; ``ContactLists.midstep_overlap``)."""
+        return self.integrator == "midstep"
 
     @property
     def velocity_changes(self) -> bool:

@@ -18,7 +18,7 @@ the step. This study runs both in the NumPy twin of the step (``engine.reference
 Both hold each contact's geometry (normal, point, lever arms) at the step's start while the
 bodies turn: a first-order error of the spin and the duration even without friction. The
 third solve, ``midstep`` (the coupled one linearised about the configuration predicted for
-mid-step, ``ReferenceModel.midstep``; a prototype in the twin, no kernel runs it yet), is
+mid-step: the ``midstep`` integrator), is
 second order on the offset collision without friction (order 2.1-2.4 in restitution,
 duration and spin) and closer in the stack's velocities.
 
@@ -63,9 +63,8 @@ CASES = (
     ("offset", dem_scenes.OFFSET, "frictionless"),
 )
 # The analytic integrator's solve (``contact_step.pair_impulses``, apart), the coupled
-# one's (``contact_coupled.coupled_impulses``, together), and the coupled one linearised about
-# the configuration predicted for mid-step (``ReferenceModel.midstep``: a prototype in the
-# twin only).
+# one's (``contact_coupled.coupled_impulses``, together), and the midstep one's (the coupled
+# solve linearised about the configuration predicted for mid-step).
 SOLVERS = ("decoupled", "coupled", "midstep")
 MEASURES = ("restitution", "duration", "spin")
 # The loaded stack: three squares between a wall and a pusher (``stack``), 0.25 s.
@@ -92,8 +91,7 @@ def _model(scenes, solver: str):
 
     return dataclasses.replace(
         ReferenceModel.from_scenes(scenes),
-        integrator="analytic" if solver == "decoupled" else "coupled",
-        midstep=solver == "midstep",
+        integrator={"decoupled": "analytic"}.get(solver, solver),
         quantum=None,
     )
 
@@ -316,7 +314,7 @@ def table(result: dict) -> str:
 
 def chart(result: dict, path: Path) -> Path:
     """Restitution, duration and spin error against the step, each case; solid coupled,
-    dashed decoupled (the kernels'), dotted the mid-step prototype."""
+    dashed decoupled (the analytic step's), dotted the midstep one."""
     from ...run.plots import save_figure, subplots
 
     ratios = np.array(result["ratios"])

@@ -115,12 +115,14 @@ def test_a_scene_on_the_gpu_equals_the_cpu(name, law, gpu):
     assert_same_on_both(name, law, "euler", gpu)
 
 
+@pytest.mark.parametrize("integrator", ["coupled", "midstep"])
 @pytest.mark.parametrize("law", sorted(LAWS))
 @pytest.mark.parametrize("name", ["two_squares", "pillar"])
-def test_the_coupled_step_on_the_gpu_equals_the_cpu(name, law, gpu):
+def test_the_coupled_step_on_the_gpu_equals_the_cpu(name, law, integrator, gpu):
     """The coupled step's 4 x 4 exponential (plain arithmetic and a square root) and its 1D
-    solves (fdlibm's exp on every backend in float64) give the CPU's trajectories."""
-    assert_same_on_both(name, law, "coupled", gpu)
+    solves (fdlibm's exp on every backend in float64) give the CPU's trajectories; and the
+    midstep one's, which also turns each pair of outlines to mid-step and clips them again."""
+    assert_same_on_both(name, law, integrator, gpu)
 
 
 def assert_same_on_both(name, law, integrator, gpu):

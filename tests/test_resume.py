@@ -48,7 +48,7 @@ def fields(sim) -> dict:
     return out
 
 
-@pytest.mark.parametrize("integrator", ["euler", "coupled"])
+@pytest.mark.parametrize("integrator", ["euler", "coupled", "midstep"])
 def test_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, monkeypatch, integrator):
     """Killed between two checkpoints and resumed, a run's file and state equal the run's
     that was never stopped, with the default step and with the coupled one (whose contacts

@@ -61,7 +61,7 @@ import numpy as np
 from . import dem_scenes
 
 LAWS = ("coulomb", "rate-state")
-INTEGRATORS = ("euler", "analytic", "coupled")  # engine.options.INTEGRATORS, the default first
+INTEGRATORS = ("euler", "analytic", "coupled", "midstep")  # engine.options.INTEGRATORS
 COLLISIONS = dem_scenes.COLLISIONS
 # dt / stable_dt of the collisions (batched: four worlds per dt; a new dt reloads the World
 # of the last, compiling nothing). Float32, which only adds round-off, takes fewer.

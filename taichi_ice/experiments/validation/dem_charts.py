@@ -31,9 +31,11 @@ COLORS = {
     "rate-state, analytic": "C1",
     "coulomb, coupled": "C4",
     "rate-state, coupled": "C5",
+    "coulomb, midstep": "C6",
+    "rate-state, midstep": "C8",
 }
-MARKERS = {"euler": "o", "analytic": "s", "coupled": "^"}
-INTEGRATOR_COLORS = {"euler": "C0", "analytic": "C2", "coupled": "C4"}
+MARKERS = {"euler": "o", "analytic": "s", "coupled": "^", "midstep": "D"}
+INTEGRATOR_COLORS = {"euler": "C0", "analytic": "C2", "coupled": "C4", "midstep": "C6"}
 STYLES = {"f64": "-", "f32": "--"}
 UNITS = {"positions": "largest block displacement (m)"}
 
@@ -109,7 +111,7 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
         ax.set_ylabel(UNITS.get(measure, "relative error"))
         ax.grid(True, which="major", alpha=0.3)
     handles = [
-        Line2D([], [], color=c, marker="s" if "analytic" in name else "o", label=name)
+        Line2D([], [], color=c, marker=MARKERS[[*name.split(", "), "euler"][1]], label=name)
         for name, c in COLORS.items()
     ]
     handles += [Line2D([], [], color="k", ls=s, label=p) for p, s in STYLES.items()]
@@ -207,7 +209,9 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
                 fontsize=8,
                 color=color,
             )
-    ax2.set_xlabel("dt / stable_dt (o, s, ^ survived: Euler, analytic, coupled; x diverged)")
+    ax2.set_xlabel(
+        "dt / stable_dt (o, s, ^, D survived: Euler, analytic, coupled, midstep; x diverged)"
+    )
     ax2.set_title("(b) the largest step each scene survives")
     fig.savefig(path, dpi=80)
 

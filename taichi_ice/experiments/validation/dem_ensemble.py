@@ -59,6 +59,7 @@ CASES = (
     ("coupled", 0.8),
     REFERENCE,
     ("analytic", 0.05),
+    ("midstep", 0.8),
 )
 # (case, against): what each comparison holds against what.
 COMPARISONS = (
@@ -70,6 +71,7 @@ COMPARISONS = (
     (("coupled", 0.8), ("coupled", 0.2)),
     (BASELINE, REFERENCE),
     (("analytic", 0.05), REFERENCE),
+    (("midstep", 0.8), BASELINE),
 )
 MEASURES = ("peak_force", "friction_energy", "concentration")
 ALPHA = 0.05  # family-wise, Holm

@@ -349,7 +349,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="euler: contact forces of the step's start (first order, the default); "
         "analytic: each contact's spring-dashpot solved over the step (second order); "
         "coupled: the analytic step with each contact's normal and tangent solved together "
-        "(collisions within 0.2 %% at four times the default step; docs/accuracy.md)",
+        "(collisions within 0.2 %% at four times the default step); "
+        "midstep: the coupled step with each contact linearised at mid-step (second order "
+        "where a collision is smooth; docs/accuracy.md)",
     )
     p.add_argument(
         "--contacts",

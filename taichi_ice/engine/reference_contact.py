@@ -191,7 +191,7 @@ def contact_force(
             point, width and lever arms, hence the force's direction, its torques and the
             pair's inverse masses, are the mid-step's, and the flow starts from the
             approach and slip of the step's velocities at the mid-step point and from the
-            depth the mid-step overlap less h/2 of that approach. Held at the step's start
+            mid-step overlap's depth less h/2 of that approach. Held at the step's start
             instead, they are a first-order error of the spin and the contact's duration
             even without friction (docs/accuracy.md, issue 30; the ``midstep`` integrator).
 

@@ -24,7 +24,8 @@
   pull, steady sliding on a moving floor against mu_ss, every law in the pillar scene before
   runs part; and what the tangential stiffness and the steady-state law's t_c change.
 - ``contact_coupling`` (``--dem``): why the coupled integrator: a contact's normal and
-  tangent solved apart (analytic) and together (coupled) in the NumPy twin, on the
+  tangent solved apart (analytic), together (coupled) and together at mid-step (midstep) in
+  the NumPy twin, on the
   collisions against their ODE and on a loaded stack.
 """
 

@@ -46,7 +46,8 @@ FORMAT_VERSION = "10"  # 2: contact memory single-buffered (no buffer axis, no c
 #                       5: a body's rotation (body_rot) instead of its turned outline;
 #                       6: the neighbour lists' gaps and paths (nbr_gap, nbr_path);
 #                       7: a digest of everything in it (damage is refused, not restored)
-#                       8: the integrator (euler, analytic; coupled, midstep since), whose state differs
+#                       8: the integrator (euler, analytic; coupled, midstep since),
+#                          whose state differs
 #                       9: fields at the layout's capacities (assemble.capacity)
 #                       10: the forcing's energy columns and clock (body_time)
 SUFFIX = ".ckpt"

@@ -265,7 +265,7 @@ class ContactStage(ContactLists):
             if ti.static(self.layout.midstep):  # linearised at mid-step (``reference_contact``)
                 a_m, p_m, n_m, w_m, c_i, c_j = self.midstep_overlap(i, j, xi_, dt)
                 if a_m > 0.0:
-                    point, normal, width, r_i, r_j = p_m, n_m, w_m, p_m - c_i, p_m - c_j
+                    normal, width, r_i, r_j = n_m, w_m, p_m - c_i, p_m - c_j
                     v_rel = self.relative(i, j, r_i, r_j, d.body_vel, d.body_omega)
                     tangent = ti.Vector([-normal[1], normal[0]])
                     approach, slip = -v_rel.dot(normal), v_rel.dot(tangent)

@@ -93,6 +93,9 @@ ENERGY_GROWTH_RTOL = 2e-3
 # The pushed field's energy budget closes to 0.1 % of the work in at dt = auto (DESIGN:
 # "up to a residual that shrinks with dt").
 BUDGET_RTOL = 0.01
+# The analytic steps' budget, settled (``ContactLists.settle``), in float64: the round-off of
+# sums of ~1e5 contact-steps' work (measured 5e-12 of the work in).
+SETTLED_BUDGET_RTOL = 1e-9
 
 # A rotated and translated copy differs by round-off of the rotated coordinates (1e-16 m),
 # which the stiff, chaotic contacts amplify over 300 steps (1e-11 m here).
@@ -679,12 +682,15 @@ def pushed_field(duration=1.0):
 
 @pytest.mark.parametrize("integrator", ["euler", "analytic", "coupled", "midstep"])
 def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision, integrator):
-    """Work in = kinetic + elastic + friction + viscous + drag + severed, up to O(dt), with
-    every integrator.
+    """Work in = kinetic + elastic + friction + viscous + drag + severed, up to O(dt) with
+    Euler's step, to round-off with the analytic ones.
 
     Over the whole compaction (2.5 s): the stick springs stiffen as the contacts widen under
     load, and without the severed term the residual kept ~0.5 % of the work in at every dt
-    (0.48 % at 0.05 stable_dt, 0.53 % at 0.2), which the first-order check here caught."""
+    (0.48 % at 0.05 stable_dt, 0.53 % at 0.2), which the first-order check here caught. The
+    analytic steps book each contact's work again at the velocity change the bodies took
+    (``ContactLists.settle``), so theirs closes to the sums' round-off at any dt (it
+    measured 4e-12 and 5e-12 of the work in here, against 2e-5 at the scene's dt before)."""
     scene = pushed_field(2.5)
     worst = []
     for fraction in (1, 2):
@@ -702,7 +708,10 @@ def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision, in
         assert work > 100.0  # the pusher did compact the rubble
         assert worst[-1] < BUDGET_RTOL
     if precision == "f64":  # float32 round-off of the energy sums hides the O(dt) term
-        assert worst[1] < FIRST_ORDER_RATIO * worst[0]
+        if integrator == "euler":
+            assert worst[1] < FIRST_ORDER_RATIO * worst[0]
+        else:
+            assert max(worst) < SETTLED_BUDGET_RTOL
 
 
 # --------------------------------------------------------------------------------------------

@@ -70,7 +70,7 @@ from ..physics.contact_step_ti import pair_impulses_ti, sliding_impedance_ti, st
 from ..physics.polygon_ti import facing_gap_ti, overlap_normals_ti
 from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE
 from ..physics.slip_ti import contact_friction_ti
-from .contact_lists import ContactLists
+from .contact_lists import SETTLE_ACCESS, ContactLists
 from .schema import Layout, contact_columns, law_columns
 from .stages import Access
 from .state import Data, Model
@@ -133,6 +133,7 @@ class ContactStage(ContactLists):
                 "contact_slip",
                 "contact_crushed",
                 "contact_force",
+                "contact_booking",
                 "body_force_q",
                 "body_torque_q",
                 "body_shift_q",
@@ -153,6 +154,7 @@ class ContactStage(ContactLists):
                 "contact_slip",
                 "contact_crushed",
                 "contact_force",
+                "contact_booking",
                 "body_force_q",
                 "body_torque_q",
                 "body_shift_q",
@@ -162,6 +164,7 @@ class ContactStage(ContactLists):
                 "body_domega",
             ),
         ),
+        "settle_all": SETTLE_ACCESS,
         "build_lists": Access(
             reads=(
                 "body_count",
@@ -436,6 +439,17 @@ class ContactStage(ContactLists):
                     crush_work,
                 )
                 elastic += held
+                if ti.static(self.layout.settles):  # what ``settle`` books again
+                    b = ti.Vector.zero(self.layout.real, 12)
+                    if exact:
+                        slid = ti.select(slip_work > 0.0, 1.0, 0.0)
+                        b = ti.Vector([approach_change, slip_change, 0.5 * dt * f_el,
+                                       0.5 * dt * (f_n - f_el), -0.5 * dt * f_t, slid,
+                                       normal[0], normal[1], cross2(r_i, normal),
+                                       cross2(r_j, normal), cross2(r_i, tangent),
+                                       cross2(r_j, tangent)], self.layout.real)  # fmt: skip
+                    if used < self.layout.slots:
+                        d.contact_booking[i, used] = b
                 # The owner's rows: plain stores (an augmented assignment would be an atomic).
                 e_f = d.body_energy[i, BodyEnergy.FRICTION]
                 d.body_energy[i, BodyEnergy.FRICTION] = e_f + friction
@@ -459,40 +473,6 @@ class ContactStage(ContactLists):
                     d.contact_force[i, used] = ti.Vector([f_n, f_t])
             used += 1
         return used, gap
-
-    @ti.func
-    def remember(self, i):
-        """Body i's contact memory of the last step, copied out of its slots (which this
-        step overwrites: only the owner's thread touches them, so one buffer suffices), and
-        its count."""
-        d, k = ti.static((self.data, self.layout.slots))
-        # (Slot count, not the contact stiffness: one element when no budget is kept.)
-        k_budget = ti.static(k if self.layout.energy else 1)
-        old = ti.Struct(
-            partner=ti.Vector.zero(ti.i32, k),
-            xi=ti.Vector.zero(self.layout.real, k),
-            elastic=ti.Vector.zero(self.layout.real, k_budget),
-            theta=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
-            slip=ti.Vector.zero(self.layout.real, k if self.layout.rate_state else 1),
-            crushed=ti.Vector.zero(self.layout.real, k if self.layout.crushing else 1),
-            force=ti.Matrix.zero(self.layout.real, k if self.layout.analytic else 1, 2),
-        )
-        n_old = d.contact_count[i]
-        for s in range(n_old):
-            old.partner[s] = d.contact_partner[i, s]
-            old.xi[s] = d.contact_xi[i, s]
-            if ti.static(self.layout.energy):
-                old.elastic[s] = d.contact_elastic[i, s]
-            if ti.static(self.layout.rate_state):
-                old.theta[s] = d.contact_theta[i, s]
-                old.slip[s] = d.contact_slip[i, s]
-            if ti.static(self.layout.crushing):
-                old.crushed[s] = d.contact_crushed[i, s]
-            if ti.static(self.layout.analytic):
-                f = d.contact_force[i, s]
-                old.force[s, 0] = f[0]
-                old.force[s, 1] = f[1]
-        return old, n_old
 
     @ti.func
     def body(self, i, dt, serial: ti.template()):

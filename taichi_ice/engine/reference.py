@@ -35,7 +35,7 @@ from ..physics.forcing import air_drag, coriolis_step, grid_sample, tilt_acceler
 from ..physics.friction import CONTACT_ROW
 from ..physics.slip import NEWTON_TOLERANCE
 from .assemble import Batch, assemble
-from .reference_contact import ContactMemory, contact_force
+from .reference_contact import ContactMemory, contact_force, settle
 from .schema import FORCE_QUANTUM
 
 __all__ = [
@@ -343,6 +343,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
         return f, float(torques[i]) * model.quantum
 
     contacts: dict[tuple[int, int], ContactMemory] = {}
+    bookings: dict[tuple[int, int], tuple] = {}
     # The configuration predicted for mid-step (``model.midstep``): free flight for h/2.
     mid = None
     if analytic and model.midstep:
@@ -389,6 +390,8 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             new.body_energy[i, BodyEnergy.VISCOUS] += c.viscous_work
             new.body_energy[i, BodyEnergy.CRUSHING] += c.crushing_work
             contacts[(i, j)] = c.memory
+            if c.booking is not None:
+                bookings[(i, j)] = c.booking
     # A contact that ended takes the energy it still held with it.
     for (i, j), mem in state.contacts.items():
         if (i, j) not in contacts:
@@ -452,6 +455,16 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
             new.body_energy[i, BodyEnergy.WORK] += -(float(f @ v) + tau * w) * dt
             new.pos[i] = state.pos[i] + dt * v
             new.angle[i] = state.angle[i] + dt * w
+    # The analytic steps book their contacts' work again at the change the bodies took
+    # (``reference_contact.settle``; the kernel's ``ContactLists.settle``).
+    for (i, j), booking in bookings.items():
+        held, viscous, friction = settle(
+            booking, (new.dvel[i], new.dvel[j]), (float(new.domega[i]), float(new.domega[j]))
+        )
+        mem = new.contacts[(i, j)]
+        new.contacts[(i, j)] = replace(mem, elastic=mem.elastic + held)
+        new.body_energy[i, BodyEnergy.FRICTION] += friction
+        new.body_energy[i, BodyEnergy.VISCOUS] += viscous
     new.time = state.time + dt
     return new
 

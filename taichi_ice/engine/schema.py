@@ -256,6 +256,7 @@ DATA: tuple[Var, ...] = (
     Var("contact_theta", "real", ("n_bodies", "slots"), "", "rate-and-state variable theta; slip.NO_INTERFACE if none", when="rate_state"),
     Var("contact_slip", "real", ("n_bodies", "slots"), "m/s", "slip rate of the law along the tangent (signed: a change of sign ends the interface); 0 if stuck", when="rate_state"),
     Var("contact_force", "real", ("n_bodies", "slots"), "N", "analytic step: the contact's mean normal and tangential force on the partner over its last step (what its pair's other forces are told from)", lanes=2, when="analytic"),
+    Var("contact_booking", "real", ("n_bodies", "slots"), "", "analytic step: what its work was booked with (the pair's estimated velocity change along the normal and tangent, m/s), the work's weights (0.5 dt f_el, 0.5 dt (f_n - f_el), -0.5 dt f_t, J s/m), whether it slid, the normal and the lever arms' cross products (m): ``settle`` books the work again at the velocity change the bodies took", lanes=12, when="settles"),
     Var("contact_crushed", "real", ("n_bodies", "slots"), "m^2", "overlap area crushed (beyond the strength), not recovered", when="crushing"),
     Var("world_energy", "f64", ("n_worlds", "energy_terms"), "J", "energy table of each world, codes.EnergyTerm columns", role="diagnostic", when="energy"),
     Var("probe_impulse", "f64", ("n_probes",), "N s", "contact impulse on each probe since the last sample", lanes=2, role="diagnostic"),
@@ -425,6 +426,12 @@ class Layout:
         """The coupled step with each contact linearised about the configuration predicted
         for mid-step (``integrator = "midstep"``; ``ContactLists.midstep_overlap``)."""
         return self.integrator == "midstep"
+
+    @property
+    def settles(self) -> bool:
+        """The analytic steps book each contact's work again once the bodies have moved, at
+        the velocity change they took (``ContactLists.settle``): where the budget is kept."""
+        return self.analytic and self.energy
 
     @property
     def velocity_changes(self) -> bool:

@@ -30,6 +30,7 @@ from .. import backend
 from ..errors import BackendError
 from .broadphase import NeighbourList
 from .contact import ContactStage
+from .contact_lists import SETTLE_ACCESS
 from .energy import EnergyMeter
 from .integrate import FORCING_READS, Integrator
 from .schema import Layout, contact_columns, law_columns
@@ -77,6 +78,7 @@ class WorldStepper(Stage):
                 "contact_count",
                 "contact_crushed",
                 "contact_force",
+                "contact_booking",
                 "contact_elastic",
                 "contact_partner",
                 "contact_slip",
@@ -116,6 +118,7 @@ class WorldStepper(Stage):
                 "contact_count",
                 "contact_crushed",
                 "contact_force",
+                "contact_booking",
                 "contact_elastic",
                 "contact_partner",
                 "contact_slip",
@@ -180,6 +183,9 @@ class WorldStepper(Stage):
                 self.contacts.listed(i, dt, True)
             for i in range(lo, hi):
                 self.integrator.body(i, dt)  # marks the lists stale
+            if ti.static(self.layout.settles):
+                for i in range(lo, hi):
+                    self.contacts.settle(i)
 
     def launch(self, plan: np.ndarray, rows: np.ndarray, impulses: np.ndarray) -> None:
         """``run`` the plan, rows ``(steps, take)``, and check that every world's thread ran
@@ -252,8 +258,10 @@ class BodyTeam(Stage):
 
         for each step:   contacts of bodies in chunks claimed from a shared counter
                          barrier
-                         advance bodies in chunks claimed from the other counter
+                         advance bodies in chunks claimed from the second counter
                          barrier
+                         (analytic steps with a budget: settle the contacts' work in
+                          chunks claimed from the third, ``ContactLists.settle``; barrier)
                          stop if a body moved half the skin (lists to rebuild)
 
     The barriers spin on an atomic counter (``barrier``) instead of sleeping: the team must
@@ -278,13 +286,18 @@ class BodyTeam(Stage):
                     {
                         *ContactStage.ACCESS["compute"].reads,
                         *Integrator.ACCESS["advance"].reads,
+                        *SETTLE_ACCESS.reads,
                         "nbr_rebuild",
                     }
                 )
             ),
             writes=tuple(
                 sorted(
-                    {*ContactStage.ACCESS["compute"].writes, *Integrator.ACCESS["advance"].writes}
+                    {
+                        *ContactStage.ACCESS["compute"].writes,
+                        *Integrator.ACCESS["advance"].writes,
+                        *SETTLE_ACCESS.writes,
+                    }
                 )
             ),
             per_contact=ContactStage.ACCESS["compute"].per_contact,
@@ -294,9 +307,9 @@ class BodyTeam(Stage):
     # Bodies a thread claims at a time: enough that claims are rare, few enough that the
     # threads finish a stage together (1e4 bodies: 157 chunks for 2 threads).
     CHUNK = 64
-    # Steps a launch may take: the 2 n threads arrivals of its barriers stay in an i32 for
-    # teams of up to 1,000 threads.
-    MAX_STEPS = 1 << 20
+    # Steps a launch may take: the (at most) 3 n threads arrivals of its barriers stay in an
+    # i32 for teams of up to 1,000 threads.
+    MAX_STEPS = 1 << 19
 
     def __init__(
         self,
@@ -315,7 +328,7 @@ class BodyTeam(Stage):
         # the barriers so far; ``claimed``: chunks claimed in each stage of the step;
         # ``done``: steps taken when the launch stops early.
         self.arrived = ti.field(ti.i32, ())
-        self.claimed = ti.field(ti.i32, 2)
+        self.claimed = ti.field(ti.i32, 3)
         self.done = ti.field(ti.i32, ())
 
     @ti.func
@@ -330,7 +343,7 @@ class BodyTeam(Stage):
     @ti.func
     def chunk(self, stage):
         """The first body of the next unclaimed chunk of ``stage`` (0: contacts, 1: the
-        integrator), ``body_count`` or more when all are claimed."""
+        integrator, 2: ``settle``), ``body_count`` or more when all are claimed."""
         return ti.atomic_add(self.claimed[stage], 1) * self.CHUNK
 
     @ti.kernel
@@ -340,6 +353,7 @@ class BodyTeam(Stage):
         self.arrived[None] = 0
         self.claimed[0] = 0
         self.claimed[1] = 0
+        self.claimed[2] = 0
         self.done[None] = n
         nb, m = ti.static((self.neighbours, self.contacts.model))
         ti.loop_config(parallelize=self.threads, block_dim=1)
@@ -355,6 +369,7 @@ class BodyTeam(Stage):
                     first = self.chunk(0)
                 if t == 0:
                     self.claimed[1] = 0  # last used before the previous barrier
+                    self.claimed[2] = 0
                 k += 1
                 self.barrier(k)
                 first = self.chunk(1)
@@ -366,6 +381,14 @@ class BodyTeam(Stage):
                     self.claimed[0] = 0
                 k += 1
                 self.barrier(k)
+                if ti.static(self.layout.settles):  # the contacts' work booked again
+                    first = self.chunk(2)
+                    while first < count:
+                        for i in range(first, ti.min(first + self.CHUNK, count)):
+                            self.contacts.settle(i)
+                        first = self.chunk(2)
+                    k += 1
+                    self.barrier(k)
                 # Every thread reads the same word: it is written in the integrator's stage
                 # only, which no thread enters again before the next barrier.
                 if ti.atomic_add(nb.nbr_rebuild[None], 0):

@@ -8,6 +8,8 @@ of worlds or bodies:
              contacts.compute()    narrow phase from the neighbour lists, contact forces,
                                    contact memory
              integrator.advance()  forces -> velocities -> positions, work and drag
+             contacts.settle_all() the analytic steps, with a budget: each contact's work
+                                   booked again at the velocity change the bodies took
 
 On a GPU each stage is a kernel launched every step. On the CPU a team of threads runs the
 two stages for many steps in one launch, meeting at a barrier after each
@@ -324,6 +326,8 @@ class World:
                 self.refresh_lists()
                 self.contacts.compute()
                 self.integrator.advance()
+                if self.layout.settles:
+                    self.contacts.settle_all()
         self.steps += n
         self.time = self.steps * self.dt
 

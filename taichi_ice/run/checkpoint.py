@@ -40,7 +40,7 @@ from ..errors import OutputError, RunFileError
 from ..scene.table import printable
 from .runfile_read import DAMAGE
 
-FORMAT_VERSION = "10"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "11"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
 #                       5: a body's rotation (body_rot) instead of its turned outline;
@@ -50,6 +50,7 @@ FORMAT_VERSION = "10"  # 2: contact memory single-buffered (no buffer axis, no c
 #                          whose state differs
 #                       9: fields at the layout's capacities (assemble.capacity)
 #                       10: the forcing's energy columns and clock (body_time)
+#                       11: the analytic steps' contact booking (contact_booking)
 SUFFIX = ".ckpt"
 
 

@@ -41,6 +41,8 @@ def traffic(world, contacts: float) -> dict:
     from ...engine.world import STAGES
 
     kernels = STEP_KERNELS[getattr(world, "stepping", "bodies")]
+    if kernels == STEP_KERNELS["bodies"] and world.layout.settles:
+        kernels = (*kernels, "contacts.settle_all")  # the analytic steps' third stage
     # The kernels touch the scenes' bodies, not the capacity past them; the hash's buckets
     # are cleared whole.
     layout = world.batch.real.replace(hash_size=world.layout.hash_size)

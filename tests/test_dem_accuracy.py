@@ -282,7 +282,8 @@ def test_quick_ensemble_runs_and_compares_on_the_same_layouts(tmp_path):
 
 def test_the_ensemble_runs_the_cases_and_layouts_asked_for(tmp_path, capsys):
     """``--cases`` keeps the comparisons among the cases run and refuses, in one line, a
-    case compared with nothing; ``--layouts`` sets how many layouts each case runs."""
+    case compared with nothing; ``--layouts`` sets how many layouts each case runs;
+    ``--laws`` which friction laws."""
     from taichi_ice.commands import validate
     from taichi_ice.errors import UsageError
     from taichi_ice.experiments.validation import dem_ensemble
@@ -308,6 +309,7 @@ def test_the_ensemble_runs_the_cases_and_layouts_asked_for(tmp_path, capsys):
         (["--cases", "coupled:0.8"], "coupled:0.8 would be compared with no other case run"),
         (["--cases", "verlet:0.2,euler:0.2"], "case 'verlet:0.2': write INTEGRATOR:RATIO"),
         (["--layouts", "1"], "--layouts: at least 2"),
+        (["--laws", "rate-state,stick"], "unknown law(s) stick: choose from coulomb, rate-state"),
     ):
         with pytest.raises(SystemExit) as exc:
             validate.main(["dem_ensemble", "--out", str(tmp_path / "unused"), *argv])
@@ -317,11 +319,18 @@ def test_the_ensemble_runs_the_cases_and_layouts_asked_for(tmp_path, capsys):
     assert not (tmp_path / "unused").exists()  # refused before anything ran
 
     summary = dem_ensemble.run(
-        tmp_path, quick=True, layouts=3, cases=[("euler", 0.2), ("euler", 0.8)], log=lambda _: None
+        tmp_path,
+        quick=True,
+        layouts=3,
+        cases=[("euler", 0.2), ("euler", 0.8)],
+        laws=["rate-state"],
+        log=lambda _: None,
     )
     assert summary["settings"]["layouts"] == 3
+    assert summary["settings"]["laws"] == ["rate-state"]
     runs = summary["runs"]
     assert len(runs) == 2 and all(len(r["seeds"]) == 3 for r in runs)
+    assert all(r["law"] == "rate-state" for r in runs)
     assert runs[0]["seeds"] == runs[1]["seeds"]
     ((key, c),) = summary["comparisons"].items()
-    assert key == "coulomb: euler 0.8 against euler 0.2" and c["peak_force"]["n"] == 3
+    assert key == "rate-state: euler 0.8 against euler 0.2" and c["peak_force"]["n"] == 3

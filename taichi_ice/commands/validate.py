@@ -91,6 +91,14 @@ def build_parser() -> argparse.ArgumentParser:
                 help="only these cases, INTEGRATOR:RATIO comma-separated (dt / stable_dt), "
                 "and the comparisons among them, e.g. 'euler:0.2,coupled:0.8' (default: all)",
             )
+            p.add_argument(
+                "--laws",
+                type=_laws,
+                default=None,
+                metavar="LIST",
+                help="only these friction laws, comma-separated: coulomb, rate-state "
+                "(default: both; --quick: coulomb)",
+            )
         if name == "speed_accuracy":
             p.add_argument("--arch", default="cpu", help="Taichi arch (cpu or gpu)")
             p.add_argument("--interfaces", type=int, default=None, help="interfaces timed")
@@ -134,6 +142,19 @@ def _cases(text: str) -> tuple[tuple[str, float], ...]:
     return tuple(out)
 
 
+def _laws(text: str) -> tuple[str, ...]:
+    from ..experiments.validation.dem_ensemble import LAWS
+
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    unknown = [x for x in names if x not in LAWS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown law(s) {', '.join(unknown) or repr(text)}: choose from "
+            f"{', '.join(LAWS)}, comma-separated"
+        )
+    return names
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -169,7 +190,12 @@ def main(argv: list[str] | None = None) -> int:
         except UsageError as exc:
             parser.error(str(exc))
         study.run(
-            args.out, quick=args.quick, reuse=args.reuse, layouts=args.layouts, cases=args.cases
+            args.out,
+            quick=args.quick,
+            reuse=args.reuse,
+            layouts=args.layouts,
+            cases=args.cases,
+            laws=args.laws,
         )
     elif args.study == "speed_accuracy":
         if args.worker:

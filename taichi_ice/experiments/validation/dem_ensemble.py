@@ -303,6 +303,7 @@ def run(
     log=print,
     layouts: int | None = None,
     cases=None,
+    laws=None,
 ) -> dict[str, Any]:
     """Every case of every law, the comparisons, ``dem_ensemble.json`` and ``.png``.
 
@@ -310,6 +311,7 @@ def run(
     same layouts and length, and run only the cases it lacks. ``layouts``: how many (default
     ``LAYOUTS``; quick 2): the paired intervals narrow as 1/sqrt(layouts). ``cases``: run only
     these ``(integrator, dt / stable_dt)`` and the comparisons among them (``select``).
+    ``laws``: run only these of ``LAWS``.
     """
     from ... import backend
 
@@ -335,6 +337,16 @@ def run(
             )
         cfg["layouts"] = int(layouts)
     cfg["cases"], cfg["comparisons"] = select(cfg["cases"], cfg["comparisons"], cases)
+    if laws is not None:
+        unknown = [law for law in laws if law not in LAWS]
+        if unknown or not laws:
+            from ...errors import UsageError
+
+            raise UsageError(
+                f"dem_ensemble --laws: {', '.join(unknown) or 'none given'}: choose from "
+                f"{', '.join(LAWS)}"
+            )
+        cfg["laws"] = tuple(laws)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "dem_ensemble.json"

@@ -305,6 +305,23 @@ def test_the_ensemble_runs_the_cases_and_layouts_asked_for(tmp_path, capsys):
     }
     with pytest.raises(UsageError, match=r"coupled:0\.8 would be compared with no other"):
         dem_ensemble.select(dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("coupled", 0.8)])
+    # A step the study does not list is held against the default's, when that runs too.
+    _, own = dem_ensemble.select(
+        dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("euler", 0.2), ("midstep", 0.6)]
+    )
+    assert own == ((("midstep", 0.6), ("euler", 0.2)),)
+    _, both = dem_ensemble.select(
+        dem_ensemble.CASES,
+        dem_ensemble.COMPARISONS,
+        [("euler", 0.2), ("euler", 0.05), ("midstep", 0.6)],
+    )
+    assert set(both) == {
+        (("euler", 0.2), ("euler", 0.05)),
+        (("midstep", 0.6), ("euler", 0.2)),
+        (("midstep", 0.6), ("euler", 0.05)),
+    }
+    with pytest.raises(UsageError, match=r"midstep:0\.6 would be compared with no other"):
+        dem_ensemble.select(dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("midstep", 0.6)])
     for argv, said in (
         (["--cases", "coupled:0.8"], "coupled:0.8 would be compared with no other case run"),
         (["--cases", "verlet:0.2,euler:0.2"], "case 'verlet:0.2': write INTEGRATOR:RATIO"),

@@ -89,7 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
                 default=None,
                 metavar="LIST",
                 help="only these cases, INTEGRATOR:RATIO comma-separated (dt / stable_dt), "
-                "and the comparisons among them, e.g. 'euler:0.2,coupled:0.8' (default: all)",
+                "and the comparisons among them, e.g. 'euler:0.2,coupled:0.8' (default: all); "
+                "a case the study does not list is compared with euler:0.2 and euler:0.05, "
+                "those of them that run too",
             )
             p.add_argument(
                 "--laws",

@@ -270,8 +270,9 @@ def plot(summary: dict[str, Any], path: Path) -> None:
 
 def select(cases, comparisons, wanted) -> tuple[tuple, tuple]:
     """The cases ``wanted`` (``(integrator, ratio)`` pairs, in their order) and the
-    comparisons of ``comparisons`` whose two cases are both among them; ``wanted`` None
-    keeps everything.
+    comparisons of ``comparisons`` whose two cases are both among them; a wanted case the
+    study does not list (another step, say) is held against ``BASELINE`` and ``REFERENCE``,
+    those of them wanted too. ``wanted`` None keeps everything.
 
     Raises:
         UsageError: a wanted case that no comparison of the study holds against another
@@ -284,6 +285,9 @@ def select(cases, comparisons, wanted) -> tuple[tuple, tuple]:
     wanted = tuple((i, float(r)) for i, r in wanted)
     every = {c for pair in comparisons for c in pair}
     kept = tuple((a, b) for a, b in comparisons if a in wanted and b in wanted)
+    for against in (BASELINE, REFERENCE):  # a case of the user's own: against these
+        if against in wanted:
+            kept += tuple((c, against) for c in wanted if c not in every and c != against)
     compared = {c for pair in kept for c in pair}
     alone = [f"{i}:{r:g}" for i, r in wanted if (i, r) not in compared]
     if alone:

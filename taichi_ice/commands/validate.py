@@ -110,17 +110,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _listed(text: str, known, what: str) -> tuple[str, ...]:
+    """Comma-separated names, each one of ``known``; else one line naming the choices."""
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    unknown = [x for x in names if x not in known]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown {what}(s) {', '.join(unknown) or repr(text)}: choose from "
+            f"{', '.join(known)}, comma-separated"
+        )
+    return names
+
+
 def _integrators(text: str) -> tuple[str, ...]:
     from ..engine.options import INTEGRATORS
 
-    names = tuple(x.strip() for x in text.split(",") if x.strip())
-    unknown = [x for x in names if x not in INTEGRATORS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(
-            f"unknown integrator(s) {', '.join(unknown) or repr(text)}: choose from "
-            f"{', '.join(INTEGRATORS)}, comma-separated"
-        )
-    return names
+    return _listed(text, INTEGRATORS, "integrator")
 
 
 def _cases(text: str) -> tuple[tuple[str, float], ...]:
@@ -147,14 +152,7 @@ def _cases(text: str) -> tuple[tuple[str, float], ...]:
 def _laws(text: str) -> tuple[str, ...]:
     from ..experiments.validation.dem_ensemble import LAWS
 
-    names = tuple(x.strip() for x in text.split(",") if x.strip())
-    unknown = [x for x in names if x not in LAWS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(
-            f"unknown law(s) {', '.join(unknown) or repr(text)}: choose from "
-            f"{', '.join(LAWS)}, comma-separated"
-        )
-    return names
+    return _listed(text, LAWS, "law")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -64,3 +64,14 @@ def test_the_window_statistics_against_direct_sums():
     shift, se = jam_dt.paired_shift(a, b)
     assert np.isclose(shift, np.mean(b - a))
     assert np.isclose(se, np.std(b - a, ddof=1) / np.sqrt(40))
+
+
+def test_the_scene_variants_change_only_what_they_name():
+    jam_dt = _script("jam_dt")
+    paper = jam_dt._scene()
+    damped = jam_dt._scene(damping=0.35)
+    healing = jam_dt._scene(rule="healing")
+    assert paper.friction.below_v_star == "paper" and healing.friction.below_v_star == "healing"
+    assert damped.ice.tangential_damping == 0.35 and paper.ice.tangential_damping == 0.25
+    assert damped.friction == paper.friction and healing.ice == paper.ice
+    assert [b.name for b in damped.bodies] == [b.name for b in paper.bodies]

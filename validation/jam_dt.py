@@ -4,7 +4,7 @@ validation/jam_dt.py --out DIR``.
 Over 256 layouts the Euler step at 0.2 stable_dt gives the pillar's rate-and-state peak force
 +15 % [+8, +22] of what it gives at 0.05 (``docs/accuracy.md``; ``dem_ensemble``), and runs of
 one layout at two steps are uncorrelated by 20 s, so a single run cannot say where the two
-part. Three measurements that can:
+part. Four measurements that can:
 
 1. **Mean force curves**: the probe force of ``--layouts`` layouts at each step (independent
    runs, ``run_ensemble``), its mean over the layouts in 1 s windows with the difference in
@@ -19,6 +19,11 @@ part. Three measurements that can:
    takes its stretch at the step's end, a numerical dashpot ``k_t dt / 2``: up to 0.07 of
    critical at 0.2 stable_dt on the stiffest contact, 0.018 at 0.05;
    ``contact_law.contact_work``), against the same layouts at 0.25.
+
+4. **The rule below v_star** (``--rule healing``, alone): the peak force of the same layouts
+   at both steps with ``RateState(below_v_star=...)`` instead of the paper's rule (under
+   which a contact whose slip falls below v_star takes mu0 and ends its interface), written
+   to ``jam_dt_RULE.json``. About 10 minutes.
 
 Writes ``jam_dt.json`` and ``jam_dt.png`` and prints the tables (docs/accuracy.md quotes
 them). About 25 minutes on 2 cores at the defaults; ``--layouts 8 --branch-layouts 4`` for a
@@ -92,11 +97,14 @@ def paired_shift(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size))
 
 
-def _scene(damping: float | None = None):
+def _scene(damping: float | None = None, rule: str | None = None):
     from taichi_ice.experiments.validation import dem_scenes
+    from taichi_ice.physics.friction import RateState
     from taichi_ice.scene.parse import load_scenario, scene_from_dict
 
     scene = dem_scenes.pillar("rate-state")
+    if rule is not None:
+        return scene.with_friction(RateState(below_v_star=rule))
     if damping is None:
         return scene
     raw = copy.deepcopy(dict(load_scenario("pillar").raw))
@@ -161,10 +169,17 @@ def main(argv=None) -> int:
     parser.add_argument("--branch-layouts", type=int, default=64, help="layouts branched")
     parser.add_argument("--t0", type=float, default=8.0, help="s: where the branches start")
     parser.add_argument("--damping", type=float, default=0.35, help="raised [ice] damping")
+    parser.add_argument(
+        "--rule",
+        choices=("paper", "healing", "frozen"),
+        help="only the peak force at both steps with this rule below v_star (4.)",
+    )
     args = parser.parse_args(argv)
     from taichi_ice import backend
 
     backend.init("cpu", "f64")
+    if args.rule is not None:
+        return _rule(args)
     record: dict = {"steps": list(STEPS), "layouts": args.layouts, "until_s": UNTIL}
 
     # 1. Mean force curves.
@@ -256,6 +271,35 @@ def main(argv=None) -> int:
     (args.out / "jam_dt.json").write_text(json.dumps(record, indent=1))
     _plot(t, means, edges, bedges, brows, record, args.out / "jam_dt.png")
     print(f"wrote {args.out / 'jam_dt.json'} and {args.out / 'jam_dt.png'}")
+    return 0
+
+
+def _rule(args) -> int:
+    """4.: the peak force at both steps with ``args.rule`` below v_star."""
+    runs = {ratio: _curves(_scene(rule=args.rule), args.layouts, ratio) for ratio in STEPS}
+    a, b = runs[STEPS[0]]["peak"], runs[STEPS[1]]["peak"]
+    shift, se = paired_shift(b, a)
+    record = {
+        "rule": args.rule,
+        "steps": list(STEPS),
+        "layouts": args.layouts,
+        "until_s": UNTIL,
+        "peak_mean_n": [float(a.mean()), float(b.mean())],
+        "peak_shift_n": shift,
+        "peak_shift_standard_error_n": se,
+        "peak_n": [a.tolist(), b.tolist()],
+        "wall_s": [runs[r]["wall_s"] for r in STEPS],
+        "status": [runs[r]["status"] for r in STEPS],
+    }
+    print(
+        f"peak force with the {args.rule} rule over {args.layouts} layouts: "
+        f"{a.mean() / 1e6:.3f} MN at {STEPS[0]}, {b.mean() / 1e6:.3f} MN at {STEPS[1]} "
+        f"({STEPS[0]} minus {STEPS[1]}: {shift / 1e6:+.3f} +- {se / 1e6:.3f})"
+    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"jam_dt_{args.rule}.json"
+    path.write_text(json.dumps(record, indent=1))
+    print(f"wrote {path}")
     return 0
 
 

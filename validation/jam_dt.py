@@ -206,6 +206,7 @@ def main(argv=None) -> int:
         "windows": rows,
         "median_first_above_s": onsets,
         "peak_mean_n": [float(runs[r]["peak"].mean()) for r in STEPS],
+        "peak_n": [runs[r]["peak"].tolist() for r in STEPS],
         "wall_s": [runs[r]["wall_s"] for r in STEPS],
         "status": [runs[r]["status"] for r in STEPS],
     }

@@ -46,32 +46,19 @@ UNTIL = 20.0  # s: the paper's run
 BRANCH_END = 19.0  # s
 
 
-def branch(source, scenes, dt: float, integrator: str = "euler"):
-    """A Simulation of ``scenes`` at ``dt`` that continues ``source``'s state: every data
-    and neighbour-list field copied but ``time_step`` (the step itself), the step count set
-    to ``source.time / dt``. With the same dt it steps bit for bit as ``source`` would
-    (``tests/test_validation_scripts.py``). Another integrator's own fields (the analytic
-    steps' last forces) start at zero."""
-    from taichi_ice.run.checkpoint import _fields
+def branch(source, scenes, dt: float):
+    """A Simulation of ``scenes`` at ``dt`` (the source's integrator) that continues
+    ``source``'s state: its fields as a checkpoint holds them (``checkpoint.state``) but its
+    own step ``time_step``, the step count set to ``source.time / dt``. With the same dt it
+    steps bit for bit as ``source`` would (``tests/test_validation_scripts.py``)."""
+    from taichi_ice.run import checkpoint
     from taichi_ice.run.simulation import Simulation
 
-    sim = Simulation(scenes, dt=dt, force_dt=True, integrator=integrator)
-    for src, dst in (
-        (source.world.data, sim.world.data),
-        (source.world.neighbours, sim.world.neighbours),
-    ):
-        have = _fields(src)
-        for name, field in _fields(dst).items():
-            if name == "time_step" or name not in have:
-                continue
-            array = have[name].to_numpy()
-            if tuple(field.shape) == ():
-                field[None] = array.reshape(-1)[0].item()
-            elif field.to_numpy().shape == array.shape:
-                field.from_numpy(np.ascontiguousarray(array))
-    sim.initial_energy = np.asarray(source.initial_energy).copy()
-    sim.world.steps = round(source.time / dt)
-    sim.world.time = sim.world.steps * dt
+    sim = Simulation(scenes, dt=dt, force_dt=True, integrator=source.options.integrator)
+    arrays = checkpoint.state(source.world)
+    arrays["data"]["time_step"] = sim.world.data.time_step.to_numpy()
+    steps = round(source.time / dt)
+    checkpoint.put_state(sim, arrays, steps, source.initial_energy, "the branched run")
     return sim
 
 

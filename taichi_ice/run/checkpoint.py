@@ -86,6 +86,46 @@ def _grid_digests(scene) -> list[str]:
     return [f.digest for f in fields if hasattr(f, "digest")]
 
 
+def state(world) -> dict:
+    """``{group: {name: array}}``: every field a run's state is, read back (what a checkpoint
+    holds and ``put_state`` puts back)."""
+    return {
+        group: {name: field.to_numpy() for name, field in _fields(container).items()}
+        for group, container in (("data", world.data), ("nbr", world.neighbours))
+    }
+
+
+def put_state(sim, arrays: dict, steps: int, initial_energy, where: str | Path) -> None:
+    """Put ``state``'s ``arrays`` into ``sim``'s World, ``steps`` steps of its dt done.
+
+    Raises:
+        RunFileError: the arrays are not this World's fields (``where`` names their source).
+    """
+    world = sim.world
+    for group, container in (("data", world.data), ("nbr", world.neighbours)):
+        fields = _fields(container)
+        saved = arrays[group]
+        if set(saved) != set(fields):
+            raise RunFileError(
+                f"{where}: the checkpoint's state ({sorted(set(saved) ^ set(fields))} differ) "
+                "is of another version of taichi-ice; start anew with --overwrite"
+            )
+        for name, field in fields.items():
+            array = np.asarray(saved[name])
+            if tuple(array.shape) != tuple(field.to_numpy().shape):
+                raise RunFileError(
+                    f"{where}: field {name} has shape {array.shape} in the checkpoint; this "
+                    "run's is other: start anew with --overwrite"
+                )
+            if tuple(field.shape) == ():  # a scalar field reads back as (1,)
+                field[None] = array.reshape(-1)[0].item()
+            else:
+                field.from_numpy(np.ascontiguousarray(array))
+    sim.initial_energy = np.asarray(initial_energy).copy()
+    world.steps = int(steps)
+    world.time = world.steps * world.dt
+
+
 def write(sim, path: str | Path, n_samples, n_frames, run_ids=None) -> Path:
     """Write ``sim``'s whole state to ``path`` atomically (write, fsync, rename);
     ``run_ids``: the run files' ``run_id`` attributes, checked on resume."""
@@ -94,10 +134,7 @@ def write(sim, path: str | Path, n_samples, n_frames, run_ids=None) -> Path:
     path = Path(path)
     world = sim.world
     tmp = path.with_name(path.name + ".tmp")
-    arrays = {
-        group: {name: field.to_numpy() for name, field in _fields(container).items()}
-        for group, container in (("data", world.data), ("nbr", world.neighbours))
-    }
+    arrays = state(world)
     size = sum(a.nbytes for g in arrays.values() for a in g.values())
     # The last checkpoint stays until the new one is whole; a disk without room for both
     # stops the run here, before the new one is begun.
@@ -237,29 +274,7 @@ def restore(sim, ckpt: dict, where: str | Path) -> None:
                 f"{where}: the checkpoint is of another run (its {key} differs from this "
                 "one's); resume with the same scene and options, or start anew with --overwrite"
             )
-    world = sim.world
-    for group, container in (("data", world.data), ("nbr", world.neighbours)):
-        fields = _fields(container)
-        saved = ckpt[group]
-        if set(saved) != set(fields):
-            raise RunFileError(
-                f"{where}: the checkpoint's state ({sorted(set(saved) ^ set(fields))} differ) "
-                "is of another version of taichi-ice; start anew with --overwrite"
-            )
-        for name, field in fields.items():
-            array = np.asarray(saved[name])
-            if tuple(array.shape) != tuple(field.to_numpy().shape):
-                raise RunFileError(
-                    f"{where}: field {name} has shape {array.shape} in the checkpoint; this "
-                    "run's is other: start anew with --overwrite"
-                )
-            if tuple(field.shape) == ():  # a scalar field reads back as (1,)
-                field[None] = array.reshape(-1)[0].item()
-            else:
-                field.from_numpy(np.ascontiguousarray(array))
-    sim.initial_energy = np.asarray(ckpt["host"]["initial_energy"]).copy()
-    world.steps = int(a["steps"])
-    world.time = world.steps * world.dt
+    put_state(sim, ckpt, int(a["steps"]), ckpt["host"]["initial_energy"], where)
 
 
 def remove(path: str | Path) -> None:
@@ -269,4 +284,15 @@ def remove(path: str | Path) -> None:
             p.unlink()
 
 
-__all__ = ["FORMAT_VERSION", "SUFFIX", "identity", "path_for", "read", "remove", "restore", "write"]
+__all__ = [
+    "FORMAT_VERSION",
+    "SUFFIX",
+    "identity",
+    "path_for",
+    "put_state",
+    "read",
+    "remove",
+    "restore",
+    "state",
+    "write",
+]

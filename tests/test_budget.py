@@ -18,6 +18,7 @@ from taichi_ice import load_scenario
 from taichi_ice.engine.world import World
 from taichi_ice.physics.friction import Coulomb, MemoryOnly, RateState, SteadyState
 from taichi_ice.run import budget
+from taichi_ice.scene.parse import scene_from_dict
 
 LAWS = {
     "coulomb 0.1": Coulomb(0.1),
@@ -33,6 +34,9 @@ LAWS = {
 # stick spring's step its dissipation and the contacts that ended what they held: 1.6 % for
 # rate-and-state in the free field, whatever the step).
 RESIDUAL_RTOL = 0.01
+# And with the slide of rate-and-state contacts in sub-steps (``[ice] slide_resolution``,
+# ``slip.sliding_steps``): its own world in each batch.
+SUB_STEPS = "rate-state, slide_resolution 0.1"
 # It shrinks with dt: halving the step divides the largest residual by 4 to 7 in the free
 # field (measured); at least by 1 / HALVING. Judged where the residual stands clear of
 # round-off (above 1e-5 of the energy lost).
@@ -49,6 +53,14 @@ CREATED_RTOL = 5e-4
 def f64(taichi_runtime):
     if taichi_runtime[1] != "f64":
         pytest.skip("budget residuals of a few 1e-4 are float64 properties")
+
+
+def every_law(name: str) -> tuple[list, list[str]]:
+    """The scene under every law, and under rate and state with its slide in sub-steps."""
+    base = load_scenario(name)
+    raw = {**base.raw, "ice": {**base.raw.get("ice", {}), "slide_resolution": 0.1}}
+    sub = scene_from_dict(raw, source=name).with_friction(RateState())
+    return [base.with_friction(law) for law in LAWS.values()] + [sub], [*LAWS, SUB_STEPS]
 
 
 def run(scenes, ratio: float, until: float, sample: float = 0.01):
@@ -69,14 +81,14 @@ def run(scenes, ratio: float, until: float, sample: float = 0.01):
 
 
 def test_free_field_budget_closes_for_every_law_and_shrinks_with_dt(f64):
-    """Floes colliding in open water with no work in, under every law: the residual stays
+    """Floes colliding in open water with no work in, under every law (and rate and state's
+    slide in sub-steps): the residual stays
     under 1 % of the energy lost, shrinks with dt, and no energy is ever created beyond the
     step's error."""
-    base = load_scenario("free_field")
-    scenes = [base.with_friction(law) for law in LAWS.values()]
+    scenes, names = every_law("free_field")
     res, came, lost, _, _ = run(scenes, 0.2, 2.5)
     finer, _, lost_finer, _, _ = run(scenes, 0.1, 2.5)
-    for k, name in enumerate(LAWS):
+    for k, name in enumerate(names):
         worst, worst_finer = np.max(np.abs(res[:, k])), np.max(np.abs(finer[:, k]))
         print(f"{name}: residual {worst / lost[k]:.2e} -> {worst_finer / lost_finer[k]:.2e}")
         assert lost[k] > 0.25 * came[k], name  # the floes did collide
@@ -89,11 +101,11 @@ def test_free_field_budget_closes_for_every_law_and_shrinks_with_dt(f64):
 
 def test_pillar_budget_closes_for_every_law(f64):
     """The paper's scene, its 20 s (the jams form after ~10 s: ~1 MJ of work in), under every
-    law: residual under 1 % of the work the pusher did."""
-    base = load_scenario("pillar")
-    scenes = [base.with_friction(law) for law in LAWS.values()]
+    law (and rate and state's slide in sub-steps): residual under 1 % of the work the pusher
+    did."""
+    scenes, names = every_law("pillar")
     res, _, _, work, _ = run(scenes, 0.2, 20.0)
-    for k, name in enumerate(LAWS):
+    for k, name in enumerate(names):
         print(f"{name}: work in {work[k]:.4g} J, residual {res[-1, k]:+.3g} J")
         assert work[k] > 0.0, name
         assert np.max(np.abs(res[:, k])) < RESIDUAL_RTOL * work[k], name

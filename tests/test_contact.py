@@ -84,7 +84,7 @@ def random_quad(rng: np.random.Generator) -> np.ndarray:
     return check_polygon(np.stack([semi[0] * np.cos(angles), semi[1] * np.sin(angles)], 1))
 
 
-def pair_scenes(rng: np.random.Generator, law) -> tuple[list, np.ndarray, np.ndarray]:
+def pair_scenes(rng: np.random.Generator, law, ice=None) -> tuple[list, np.ndarray, np.ndarray]:
     """Two-body scenes (laid apart, as scene files must be) and the overlapping placements.
 
     Returns:
@@ -108,9 +108,8 @@ def pair_scenes(rng: np.random.Generator, law) -> tuple[list, np.ndarray, np.nda
                 body["velocity"] = rng.uniform(-1.0, 1.0, 2).tolist()
                 body["omega"] = float(rng.uniform(-2.0, 2.0))
             bodies.append(body)
-        scene = scene_from_dict(
-            {"simulation": {"duration": 1.0}, "friction": law.to_dict(), "body": bodies}
-        )
+        raw = {"simulation": {"duration": 1.0}, "friction": law.to_dict(), "body": bodies}
+        scene = scene_from_dict({**raw, "ice": ice} if ice else raw)
         a = rng.uniform(0.0, 2.0 * np.pi, 2)
         p = transform(scene.bodies[0].vertices, [0.0, 0.0], a[0])
         q0 = transform(scene.bodies[1].vertices, [0.0, 0.0], a[1])
@@ -169,13 +168,17 @@ def roundoff_spread(pair, p, q, memory, rng) -> tuple[float, float]:
     return ROUNDOFF_SPREAD * d_slip, ROUNDOFF_SPREAD * d_theta
 
 
-@pytest.mark.parametrize("law", [Coulomb(0.4), RateState()], ids=["coulomb", "rate-state"])
-def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
+@pytest.mark.parametrize(
+    "law, ice",
+    [(Coulomb(0.4), None), (RateState(), None), (RateState(), {"slide_resolution": 0.002})],
+    ids=["coulomb", "rate-state", "rate-state-sub-steps"],
+)
+def test_contact_twin_matches_kernel_on_random_pairs(f64, law, ice):
     """Force, torque, memory and dissipation of one contact match the NumPy twin, twice:
     the damped stick spring, the slip rate and theta, and the work booked at the
-    mid-step velocity."""
+    mid-step velocity; with ``[ice] slide_resolution``, the slide in sub-steps."""
     rng = np.random.default_rng(SEED)
-    scenes, pos, ang = pair_scenes(rng, law)
+    scenes, pos, ang = pair_scenes(rng, law, ice)
     world = World(scenes)
     model = ReferenceModel.from_scenes(scenes)
     d = world.data
@@ -192,7 +195,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
     memory: dict = {}
     fused = backend.actual_arch() != "cpu"  # the CPU compiles IEEE as written
     rng_noise = np.random.default_rng(SEED + 1)
-    seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0, "severed": 0}
+    seen = {"slip": 0, "stick": 0, "fallback": 0, "remembered": 0, "severed": 0, "sub-stepped": 0}
     worst = 0.0  # largest force difference (N)
     for step in range(2):
         world.place(state.pos, state.angle)
@@ -227,6 +230,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                 inv_mass=(model.inv_mass(i), model.inv_mass(j)),
                 inv_inertia=(model.inv_inertia(i), model.inv_inertia(j)),
                 zeta=float(model.zeta[w]),
+                slide_resolution=float(model.slide_resolution[w]),
                 dvel=(dvel[i], dvel[j]),
                 domega=(float(domega[i]), float(domega[j])),
                 memory=memory.get((i, j)),
@@ -241,6 +245,8 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
                     assert np.all(force_q[k] == 0) and torque_q[k] == 0
                 continue
             expected[(i, j)] = c.memory
+            if ice and pair(p, q, slide_resolution=0.0).memory.xi != c.memory.xi:
+                seen["sub-stepped"] += 1  # the sub-steps changed the slide: they were taken
             if fused:
                 spread[(i, j)] = roundoff_spread(pair, p, q, c.memory, rng_noise)
             seen["slip" if abs(c.tangential_force) >= c.mu * c.normal_force else "stick"] += 1
@@ -277,6 +283,7 @@ def test_contact_twin_matches_kernel_on_random_pairs(f64, law):
     assert seen["slip"] > 20 and seen["stick"] > 20 and seen["remembered"] > 50
     assert seen["severed"] > 5  # contacts that ended on the second step
     assert seen["fallback"] > 0
+    assert (seen["sub-stepped"] > 10) == bool(ice)
 
 
 # --------------------------------------------------------------------------------------------

@@ -24,6 +24,11 @@ part. Four measurements that can:
    at both steps with ``RateState(below_v_star=...)`` instead of the paper's rule (under
    which a contact whose slip falls below v_star takes mu0 and ends its interface), written
    to ``jam_dt_RULE.json``. About 10 minutes.
+5. **The slide in sub-steps** (``--slide-resolution R``, alone): the same with ``[ice]
+   slide_resolution = R`` (a sliding contact's stick spring relaxes over ``c_t / k_t``, no
+   less than 2.5 default steps: in one step, the slip rate the law sees is that of the
+   impedance ``k_t dt + c_t``; ``slip.sliding_steps``), written to
+   ``jam_dt_slide_R.json``. About 12 minutes.
 
 Writes ``jam_dt.json`` and ``jam_dt.png`` and prints the tables (docs/accuracy.md quotes
 them). About 25 minutes on 2 cores at the defaults; ``--layouts 8 --branch-layouts 4`` for a
@@ -84,7 +89,7 @@ def paired_shift(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size))
 
 
-def _scene(damping: float | None = None, rule: str | None = None):
+def _scene(damping: float | None = None, rule: str | None = None, slide: float | None = None):
     from taichi_ice.experiments.validation import dem_scenes
     from taichi_ice.physics.friction import RateState
     from taichi_ice.scene.parse import load_scenario, scene_from_dict
@@ -92,10 +97,13 @@ def _scene(damping: float | None = None, rule: str | None = None):
     scene = dem_scenes.pillar("rate-state")
     if rule is not None:
         return scene.with_friction(RateState(below_v_star=rule))
-    if damping is None:
+    if damping is None and slide is None:
         return scene
     raw = copy.deepcopy(dict(load_scenario("pillar").raw))
-    raw.setdefault("ice", {})["tangential_damping"] = damping
+    if damping is not None:
+        raw.setdefault("ice", {})["tangential_damping"] = damping
+    if slide is not None:
+        raw.setdefault("ice", {})["slide_resolution"] = slide
     return scene_from_dict(raw, source="pillar").with_friction(scene.friction)
 
 
@@ -161,12 +169,20 @@ def main(argv=None) -> int:
         choices=("paper", "healing", "frozen"),
         help="only the peak force at both steps with this rule below v_star (4.)",
     )
+    parser.add_argument(
+        "--slide-resolution",
+        type=float,
+        help="only the peak force at both steps with this [ice] slide_resolution (5.)",
+    )
     args = parser.parse_args(argv)
     from taichi_ice import backend
 
     backend.init("cpu", "f64")
     if args.rule is not None:
-        return _rule(args)
+        return _variant(args, _scene(rule=args.rule), "rule", args.rule, args.rule)
+    if args.slide_resolution is not None:
+        r = args.slide_resolution
+        return _variant(args, _scene(slide=r), "slide_resolution", r, f"slide_{r:g}")
     record: dict = {"steps": list(STEPS), "layouts": args.layouts, "until_s": UNTIL}
 
     # 1. Mean force curves.
@@ -262,13 +278,14 @@ def main(argv=None) -> int:
     return 0
 
 
-def _rule(args) -> int:
-    """4.: the peak force at both steps with ``args.rule`` below v_star."""
-    runs = {ratio: _curves(_scene(rule=args.rule), args.layouts, ratio) for ratio in STEPS}
+def _variant(args, scene, key: str, value, tag: str) -> int:
+    """4. and 5.: the peak force at both steps of a variant of the scene (``key`` = ``value``),
+    written to ``jam_dt_TAG.json``."""
+    runs = {ratio: _curves(scene, args.layouts, ratio) for ratio in STEPS}
     a, b = runs[STEPS[0]]["peak"], runs[STEPS[1]]["peak"]
     shift, se = paired_shift(b, a)
     record = {
-        "rule": args.rule,
+        key: value,
         "steps": list(STEPS),
         "layouts": args.layouts,
         "until_s": UNTIL,
@@ -280,12 +297,12 @@ def _rule(args) -> int:
         "status": [runs[r]["status"] for r in STEPS],
     }
     print(
-        f"peak force with the {args.rule} rule over {args.layouts} layouts: "
+        f"peak force with {key} {value} over {args.layouts} layouts: "
         f"{a.mean() / 1e6:.3f} MN at {STEPS[0]}, {b.mean() / 1e6:.3f} MN at {STEPS[1]} "
         f"({STEPS[0]} minus {STEPS[1]}: {shift / 1e6:+.3f} +- {se / 1e6:.3f})"
     )
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / f"jam_dt_{args.rule}.json"
+    path = args.out / f"jam_dt_{tag}.json"
     path.write_text(json.dumps(record, indent=1))
     print(f"wrote {path}")
     return 0

@@ -480,6 +480,7 @@ def _contact_values(scenes: tuple) -> dict[str, np.ndarray]:
         "world_contact_viscosity": np.array([i.contact_viscosity for i in ice], dtype=float),
         "world_tangential_stiffness": np.array([i.tangential_stiffness for i in ice], dtype=float),
         "world_tangential_damping": np.array([i.tangential_damping for i in ice], dtype=float),
+        "world_slide_resolution": np.array([i.slide_resolution for i in ice], dtype=float),
         "world_crushing_force": np.array(
             [(i.crushing_strength or 0.0) * i.thickness for i in ice], dtype=float
         ),

@@ -69,7 +69,7 @@ from ..physics.contact_law_ti import (
 from ..physics.contact_step_ti import pair_impulses_ti, sliding_impedance_ti, stick_or_slide_ti
 from ..physics.polygon_ti import facing_gap_ti, overlap_normals_ti
 from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE
-from ..physics.slip_ti import contact_friction_ti
+from ..physics.slip_ti import contact_friction_ti, sliding_steps_ti
 from .contact_lists import SETTLE_ACCESS, ContactLists
 from .schema import Layout, contact_columns, law_columns
 from .stages import Access
@@ -350,13 +350,14 @@ class ContactStage(ContactLists):
             mu = 0.0
             theta_new = 0.0
             slip_rate = 0.0
-            if ti.static(self.layout.rate_state):
+            # Rate and state: the Euler step solves the law with the tangential step
+            # (``sliding_steps_ti``, below); the analytic step first, from its impulses.
+            if ti.static(self.layout.rate_state and self.layout.analytic):
                 f_trial = ti.abs(k_t * (xi + slip * dt) + c_t * slip)
                 impedance = k_t * dt + c_t
-                if ti.static(self.layout.analytic):
-                    if exact:  # the stuck spring-dashpot's mean force over the step
-                        f_trial = ti.abs(p_t) / dt
-                        impedance = sliding_impedance_ti(k_t, c_t, dt)
+                if exact:  # the stuck spring-dashpot's mean force over the step
+                    f_trial = ti.abs(p_t) / dt
+                    impedance = sliding_impedance_ti(k_t, c_t, dt)
                 mu, theta_new, slip_rate = contact_friction_ti(
                     theta,
                     last_slip,
@@ -375,7 +376,7 @@ class ContactStage(ContactLists):
                     ti.static(self.method),
                     ti.static(self.tol),
                 )
-            else:
+            elif ti.static(not self.layout.rate_state):
                 mu = m.world_mu[w]
 
             f_t = 0.0 * k_e
@@ -392,6 +393,29 @@ class ContactStage(ContactLists):
                     f_t, xi_new, slip_work, damp_work = tangential_force_ti(
                         xi, slip, dt, k_t, c_t, mu * f_n
                     )
+            elif ti.static(self.layout.rate_state):
+                # The law and the capped spring-dashpot together, in sub-steps that resolve
+                # the slide where ``[ice] slide_resolution`` asks (one step by default).
+                mu, theta_new, slip_rate, f_t, xi_new, slip_work, damp_work = sliding_steps_ti(
+                    theta,
+                    last_slip,
+                    slip,
+                    xi,
+                    f_n,
+                    k_t,
+                    c_t,
+                    dt,
+                    m.world_A[w],
+                    m.world_B[w],
+                    m.world_mu0[w],
+                    m.world_v_star[w],
+                    m.world_t_c[w],
+                    m.world_memory[w],
+                    m.world_rest_rule[w],
+                    m.world_slide_resolution[w],
+                    ti.static(self.method),
+                    ti.static(self.tol),
+                )
             else:
                 f_t, xi_new, slip_work, damp_work = tangential_force_ti(
                     xi, slip, dt, k_t, c_t, mu * f_n

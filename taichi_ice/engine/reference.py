@@ -73,7 +73,8 @@ class ReferenceModel:
             (float) when every world is Coulomb, else a world's rate-and-state columns.
         k_e (N/m^2), k_v (Pa s): normal contact parameters, ``(W,)`` one per world. ratio:
             tangential to normal stiffness, ``(W,)``. zeta: the tangential dashpot's
-            fraction of critical damping, ``(W,)``.
+            fraction of critical damping, ``(W,)``. slide_resolution: ``(W,)`` the sub-steps
+            of a sliding rate-and-state contact (``[ice] slide_resolution``), or None (0).
         method: ``codes.ThetaMethod`` for theta (one per batch).
         crushing_force: ``(W,)`` strength x thickness (N/m), or None.
         tol: Newton's tolerance of the sliding rate.
@@ -99,6 +100,7 @@ class ReferenceModel:
     k_v: np.ndarray
     ratio: np.ndarray
     zeta: np.ndarray
+    slide_resolution: np.ndarray | None = None
     method: int = ThetaMethod.EXPONENTIAL
     quantum: float | None = FORCE_QUANTUM
     crushing_force: np.ndarray | None = None
@@ -156,6 +158,9 @@ class ReferenceModel:
             "inv_mass": (self.inv_mass(i), self.inv_mass(j)),
             "inv_inertia": (self.inv_inertia(i), self.inv_inertia(j)),
             "zeta": float(self.zeta[w]),
+            "slide_resolution": 0.0
+            if self.slide_resolution is None
+            else float(self.slide_resolution[w]),
             "method": self.method,
             "crushing_force": None
             if self.crushing_force is None
@@ -192,6 +197,7 @@ class ReferenceModel:
             k_v=host.world_contact_viscosity,
             ratio=host.world_tangential_stiffness,
             zeta=host.world_tangential_damping,
+            slide_resolution=host.world_slide_resolution,
             method=layout.theta_method,
             quantum=quantum,
             crushing_force=host.world_crushing_force if layout.crushing else None,

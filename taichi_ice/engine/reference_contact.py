@@ -34,7 +34,14 @@ from ..physics.contact_law import (
 from ..physics.contact_step import pair_impulses, sliding_impedance, stick_or_slide
 from ..physics.friction import method_code
 from ..physics.polygon import overlap
-from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE, NO_INTERFACE, contact_friction
+from ..physics.slip import (
+    NEW_CONTACT,
+    NEWTON_TOLERANCE,
+    NO_INTERFACE,
+    contact_friction,
+    slide_steps,
+    sliding_steps,
+)
 
 __all__ = ["ContactForce", "ContactMemory", "contact_force", "settle"]
 
@@ -143,6 +150,7 @@ def contact_force(
     inv_mass: tuple[float, float],
     inv_inertia: tuple[float, float],
     zeta: float = 0.25,
+    slide_resolution: float = 0.0,
     dvel: tuple = ((0.0, 0.0), (0.0, 0.0)),
     domega: tuple[float, float] = (0.0, 0.0),
     memory: ContactMemory | None = None,
@@ -173,6 +181,8 @@ def contact_force(
             partner, 0 for a fixed or kinematic body.
         zeta: the tangential dashpot's fraction of critical damping
             (``[ice] tangential_damping``; ``contact_law.tangential_damping``).
+        slide_resolution: a rate-and-state contact's sub-steps in the Euler step
+            (``[ice] slide_resolution``; ``slip.sliding_steps``), 0 for one step.
         dvel, domega: the velocity (m/s) and spin (rad/s) changes of the owner's and the
             partner's last steps, with which the contact books its work
             (``contact_law.contact_work``).
@@ -295,8 +305,33 @@ def contact_force(
             scale = cap_n / f_n
             f_n, f_el, q_n = cap_n, f_el * scale, q_n * scale
     theta_new, v = NO_INTERFACE, 0.0
+    steps = None  # the Euler step's rate-and-state contact: the law with its tangential step
     if isinstance(law, (int, float)):
         mu, theta_new = float(law), 0.0  # no theta is kept
+    elif not analytic:
+        row = law.contact_row()
+        code = method_code(getattr(law, "method", "exponential")) if method is None else method
+        steps = sliding_steps(
+            old.theta,
+            old.slip,
+            slip,
+            old.xi,
+            f_n,
+            k_t,
+            c_t,
+            dt,
+            row["A"],
+            row["B"],
+            row["mu0"],
+            row["v_star"],
+            row["t_c"],
+            row["memory"],
+            row["rest_rule"],
+            code,
+            tol,
+            slide_resolution,
+        )
+        mu, theta_new, v = steps[:3]
     else:
         row = law.contact_row()
         code = method_code(getattr(law, "method", "exponential")) if method is None else method
@@ -332,6 +367,11 @@ def contact_force(
         f_t, g_t, xi_new, slip_work, damp_work = stick_or_slide(
             p_t, q_t, old.xi, xi1, slip, dt, k_t, c_t, mu * f_n * dt, mu * q_n
         )
+    elif steps is not None:
+        f_t, xi_new, slip_work, damp_work = steps[3:]
+        sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n
+        if slide_steps(k_t, c_t, dt, law.contact_row()["memory"], slide_resolution) > 1:
+            sliding = slip_work > 0.0  # in sub-steps: it slid in one of them
     else:
         sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n
         f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)

@@ -131,6 +131,7 @@ def contact_columns() -> tuple[str, ...]:
         "world_contact_viscosity",
         "world_tangential_stiffness",
         "world_tangential_damping",
+        "world_slide_resolution",
         "world_crushing_force",
     )
 
@@ -227,6 +228,7 @@ MODEL: tuple[Var, ...] = (
     Var("world_contact_viscosity", "real", ("n_worlds",), "Pa s", "k_v, Pa s per m of contact width ([ice] contact_viscosity)", role="cold", init=HOST),
     Var("world_tangential_stiffness", "real", ("n_worlds",), "", "k_t / (k_e L): the stick spring's ratio to the normal one ([ice] tangential_stiffness)", role="cold", init=HOST),
     Var("world_tangential_damping", "real", ("n_worlds",), "", "the stick spring's dashpot as a fraction of critical ([ice] tangential_damping)", role="cold", init=HOST),
+    Var("world_slide_resolution", "real", ("n_worlds",), "", "a sliding rate-and-state contact's sub-steps: at most this fraction of c_t / k_t each, 0 for one step ([ice] slide_resolution; Euler step)", role="cold", init=HOST),
     Var("world_crushing_force", "real", ("n_worlds",), "N/m", "strength x thickness: the elastic normal force's cap per m of contact width", role="cold", when="crushing", init=HOST),
     Var("world_runaway_step", "real", ("n_worlds",), "m", "a dynamic body that moves farther in one step flags its world as diverged (RUNAWAY_STEP_FRACTION of its thinnest dynamic body; inf if none)", role="cold", init=HOST),
     Var("grid_inv_cell", "f64", (), "1/m", "1 / the spatial hash's cell edge (the largest small body's diameter plus the skin)", role="cold", init=HOST),

@@ -11,6 +11,7 @@ random inputs, for the benchmarks, and for studies that integrate thousands of i
 - ``overlap_batch_ti``: the overlap and separating-axis functions of ``polygon`` on many
   polygon pairs (``polygon.overlap`` and friends are the NumPy twins);
 - ``contact_friction_batch_ti``: the friction of many DEM contacts (``slip``);
+- ``sliding_steps_batch_ti``: their tangential step, the slide in sub-steps (``slip``);
 - ``rotation_batch_ti``: a body's rotation (``polygon_ti.rotation_ti``) of many angles.
 
 The engine itself does not use them: its stages call the same ``_ti`` functions from their
@@ -47,7 +48,7 @@ from .polygon_ti import (
     sat_separated_ti,
 )
 from .slip import NEWTON_TOLERANCE
-from .slip_ti import contact_friction_ti
+from .slip_ti import contact_friction_ti, sliding_steps_ti
 
 # --------------------------------------------------------------------------------------------
 # Many sliding interfaces at once
@@ -459,6 +460,55 @@ def contact_friction_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.nd
     out = np.zeros((inputs.shape[0], 3), dtype=real)
     if inputs.shape[0]:
         _contact_friction_kernel(inputs, codes, out, int(method), NEWTON_TOLERANCE[precision])
+    return out
+
+
+@ti.kernel
+def _sliding_steps_kernel(
+    inputs: ti.types.ndarray(ndim=2),
+    codes: ti.types.ndarray(ndim=2),
+    out: ti.types.ndarray(ndim=2),
+    method: ti.template(),
+    tol: ti.template(),
+):
+    # inputs (N, 14): theta, last_slip, slip, xi, f_n, k_t, c_t, dt, A, B, mu0, v_star, t_c,
+    # resolution; codes (N, 2): memory, rest rule; out (N, 7).
+    for i in range(inputs.shape[0]):
+        r = sliding_steps_ti(
+            inputs[i, 0], inputs[i, 1], inputs[i, 2], inputs[i, 3], inputs[i, 4], inputs[i, 5],
+            inputs[i, 6], inputs[i, 7], inputs[i, 8], inputs[i, 9], inputs[i, 10],
+            inputs[i, 11], inputs[i, 12], codes[i, 0], codes[i, 1], inputs[i, 13], method, tol,
+        )  # fmt: skip
+        for k in ti.static(range(7)):
+            out[i, k] = r[k]
+
+
+def sliding_steps_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.ndarray:
+    """``slip_ti.sliding_steps_ti`` on N contacts at once (for the twin tests).
+
+    Args:
+        inputs: ``(N, 14)`` rows (theta, last_slip, slip, xi, f_n, k_t, c_t, dt, A, B, mu0,
+            v_star, t_c, resolution).
+        codes: ``(N, 2)`` int rows (memory, rest rule).
+        method: ``codes.ThetaMethod`` (compile-time).
+
+    Returns:
+        ``(N, 7)`` rows (mu, theta_new, V, f_t, xi_new, slip_work, damp_work) in the running
+        precision.
+    """
+    if backend.current() is None:
+        backend.init("cpu", "f64")
+    precision = backend.current()[1]
+    real = backend.real_dtype(precision)
+    inputs = np.ascontiguousarray(inputs, dtype=real)
+    codes = np.ascontiguousarray(codes, dtype=np.int32)
+    if inputs.ndim != 2 or inputs.shape[1] != 14 or codes.shape != (inputs.shape[0], 2):
+        raise ValueError(
+            f"inputs must be (N, 14) and codes (N, 2); got {inputs.shape}, {codes.shape}"
+        )
+    out = np.zeros((inputs.shape[0], 7), dtype=real)
+    if inputs.shape[0]:
+        _sliding_steps_kernel(inputs, codes, out, int(method), NEWTON_TOLERANCE[precision])
     return out
 
 

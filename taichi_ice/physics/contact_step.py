@@ -223,11 +223,10 @@ def stick_or_slide(p_t, q_t, xi, xi1, slip, h, k_t, c_t, cap_p, cap_q):
         along the tangent (N, ``-P / h``), its position impulse as a force (N, ``-2 Q / h^2``:
         what the body update takes), the stretch after the step, and the frictional and
         dashpot work (J): stuck, none is frictional; sliding, the force is the cap, the
-        spring-dashpot relaxes toward it over the step (its mean force, the stretch's
-        trapezoid, is the cap: ``k_t (xi + xi') / 2 + c_t (xi' - xi) / h = cap``, the
-        analytic step's counterpart of ``contact_law.tangential_force``'s backward Euler,
-        with the slip rate's impedance ``k_t h / 2 + c_t``, ``sliding_impedance``) and the
-        cap's work on the slip is frictional. The two with the spring's change add
+        spring-dashpot relaxes toward it over the step by backward Euler, as
+        ``contact_law.tangential_force``'s (``k_t xi' + c_t (xi' - xi) / h = cap``, the slip
+        rate's impedance ``k_t h + c_t``, ``sliding_impedance``) and the cap's work on the
+        slip is frictional. The two with the spring's change add
         up to the work on the start-of-step slip, ``-f_t slip h = slip_work + damp_work +
         k_t xi_new (xi_new - xi)`` (``contact_law.contact_work`` books the rest at the
         mid-step velocity).
@@ -247,11 +246,11 @@ def stick_or_slide(p_t, q_t, xi, xi1, slip, h, k_t, c_t, cap_p, cap_q):
 
 
 def sliding_impedance(k_t, c_t, h):
-    """N s/m: how much the step's mean tangential force falls per m/s of sliding, ``k_t h /
-    2 + c_t`` (the stretch a steady slide takes off grows through the step, so the spring
-    loses half of ``k_t V h`` on the mean); what the rate-and-state law's sliding rate is
-    solved with in the analytic step (``slip.contact_friction``'s ``K``; the Euler step's
-    is ``k_t h + c_t``, its force taken at the step's end)."""
+    """N s/m: how much the sliding tangential force falls per m/s of sliding, ``k_t h +
+    c_t``: the stretch a slide at V takes off over the step, ``V h``, is taken at the step's
+    end (``stick_or_slide``'s backward Euler, as the Euler step's
+    ``contact_law.tangential_force``); what the rate-and-state law's sliding rate is solved
+    with in the analytic step (``slip.contact_friction``'s ``K``)."""
     return k_t * h + c_t
 
 

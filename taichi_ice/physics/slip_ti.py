@@ -3,7 +3,8 @@
 The slip rate solved in the step, a new interface's start and the rule below ``v_star`` are
 described in ``slip``, which holds the NumPy reference and the constants both share
 (``NO_INTERFACE``, ``NEW_CONTACT``, Newton's tolerance and iterations); this module holds only
-the function the contact kernel calls, step for step as its twin.
+the functions the contact kernel calls, step for step as their twins (``sliding_steps_ti``:
+``slip.sliding_steps``).
 """
 
 # No ``from __future__ import annotations``: Taichi reads the annotations of its functions.
@@ -11,11 +12,18 @@ the function the contact kernel calls, step for step as its twin.
 import taichi as ti
 
 from ..codes import RestRule
+from .contact_law_ti import tangential_force_ti
 from .fmath_ti import exp_any, log_any
 from .friction_ti import theta_step_ti
-from .slip import NEW_CONTACT_ABOVE, NEWTON_ITERATIONS, NO_INTERFACE, NO_INTERFACE_ABOVE
+from .slip import (
+    NEW_CONTACT_ABOVE,
+    NEWTON_ITERATIONS,
+    NO_INTERFACE,
+    NO_INTERFACE_ABOVE,
+    SLIDE_STEPS_MOST,
+)
 
-__all__ = ["contact_friction_ti"]
+__all__ = ["contact_friction_ti", "sliding_steps_ti"]
 
 
 @ti.func
@@ -100,3 +108,61 @@ def contact_friction_ti(
     if slip < 0.0:
         v = -v
     return mu, theta_new, v
+
+
+@ti.func
+def sliding_steps_ti(
+    theta,
+    last_slip,
+    slip,
+    xi,
+    f_n,
+    k_t,
+    c_t,
+    dt,
+    A,
+    B,
+    mu0,
+    v_star,
+    t_c,
+    memory,
+    rule,
+    resolution,
+    method: ti.template(),
+    tol: ti.template(),
+):
+    """Taichi twin of :func:`slip.sliding_steps`; returns ``(mu, theta_new, V, f_t, xi_new,
+    slip_work, damp_work)``."""
+    n = 1
+    if memory != 0 and resolution > 0.0:
+        n = ti.cast(ti.ceil(k_t * dt / (resolution * c_t)), ti.i32)
+        n = ti.min(ti.max(n, 1), SLIDE_STEPS_MOST)
+    h = dt / n
+    x = xi
+    th = theta
+    last = last_slip
+    mu = 0.0 * f_n
+    v = 0.0 * f_n
+    f_sum = 0.0 * f_n
+    slip_work = 0.0 * f_n
+    damp_work = 0.0 * f_n
+    held = 0.0 * f_n
+    for _ in range(n):
+        f_trial = ti.abs(k_t * (x + slip * h) + c_t * slip)
+        mu, th, v = contact_friction_ti(
+            th, last, slip, f_trial, f_n, k_t * h + c_t, h, A, B, mu0, v_star, t_c, memory,
+            rule, method, tol,
+        )  # fmt: skip
+        f, x_new, sw, dw = tangential_force_ti(x, slip, h, k_t, c_t, mu * f_n)
+        f_sum += f
+        slip_work += sw
+        damp_work += dw
+        held += 0.5 * k_t * (x_new - x) * (x_new - x)
+        x = x_new
+        last = v
+    f_t = f_sum
+    if n > 1:
+        f_t = f_sum / n
+        step = x - xi
+        damp_work += held - 0.5 * k_t * step * step
+    return mu, th, v, f_t, x, slip_work, damp_work

@@ -105,6 +105,11 @@ class IceProperties:
         tangential_damping: the tangential dashpot as a fraction of critical damping of the
             stick spring at the pair's mass along the tangent (``contact_law.tangential_damping``),
             dimensionless.
+        slide_resolution: a sliding rate-and-state contact's step is taken in sub-steps of
+            at most this fraction of its stick spring's relaxation time ``c_t / k_t``
+            (``slip.sliding_steps``; the Euler step), so that the slip rate the law sees does
+            not depend on dt through the spring's backward-Euler relaxation; 0 (default):
+            one step. Dimensionless, >= 0.
         crushing_strength: the ice's strength (Pa), or None (default: no limit). A contact's
             normal elastic force is capped at strength x thickness x contact width; overlap
             beyond the cap is crushed, not recovered, and its work is the budget's
@@ -117,6 +122,7 @@ class IceProperties:
     contact_viscosity: float = 3.16e4
     tangential_stiffness: float = 0.5
     tangential_damping: float = 0.25
+    slide_resolution: float = 0.0
     crushing_strength: float | None = None
 
 

@@ -181,6 +181,7 @@ def parse_ice(source: str, data: Any) -> IceProperties:
             "tangential_stiffness", d.tangential_stiffness, positive=True
         ),
         tangential_damping=t.number("tangential_damping", d.tangential_damping, positive=True),
+        slide_resolution=t.number("slide_resolution", d.slide_resolution, nonnegative=True),
         crushing_strength=t.number("crushing_strength", None, positive=True, unit=" Pa"),
     )
 

@@ -28,7 +28,9 @@ part. Four measurements that can:
    slide_resolution = R`` (a sliding contact's stick spring relaxes over ``c_t / k_t``, no
    less than 2.5 default steps: in one step, the slip rate the law sees is that of the
    impedance ``k_t dt + c_t``; ``slip.sliding_steps``), written to
-   ``jam_dt_slide_R.json``. About 12 minutes.
+   ``jam_dt_slide_R.json`` (``jam_dt_slide_R_STEPS.json`` with ``--steps``, e.g. ``--steps
+   0.0125`` for the finest step alone, ~35 minutes at ``--slide-resolution 0``). About 12
+   minutes at 0.025.
 
 Writes ``jam_dt.json`` and ``jam_dt.png`` and prints the tables (docs/accuracy.md quotes
 them). About 25 minutes on 2 cores at the defaults; ``--layouts 8 --branch-layouts 4`` for a
@@ -170,6 +172,13 @@ def main(argv=None) -> int:
         help="only the peak force at both steps with this rule below v_star (4.)",
     )
     parser.add_argument(
+        "--steps",
+        type=lambda text: tuple(float(x) for x in text.split(",")),
+        default=STEPS,
+        help="dt / stable_dt of --rule and --slide-resolution, comma-separated (default "
+        f"{','.join(map(str, STEPS))}); the first is the one the others are held against",
+    )
+    parser.add_argument(
         "--slide-resolution",
         type=float,
         help="only the peak force at both steps with this [ice] slide_resolution (5.)",
@@ -182,7 +191,8 @@ def main(argv=None) -> int:
         return _variant(args, _scene(rule=args.rule), "rule", args.rule, args.rule)
     if args.slide_resolution is not None:
         r = args.slide_resolution
-        return _variant(args, _scene(slide=r), "slide_resolution", r, f"slide_{r:g}")
+        tag = f"slide_{r:g}" + ("" if args.steps == STEPS else "_" + "_".join(map(str, args.steps)))
+        return _variant(args, _scene(slide=r), "slide_resolution", r, tag)
     record: dict = {"steps": list(STEPS), "layouts": args.layouts, "until_s": UNTIL}
 
     # 1. Mean force curves.
@@ -279,28 +289,30 @@ def main(argv=None) -> int:
 
 
 def _variant(args, scene, key: str, value, tag: str) -> int:
-    """4. and 5.: the peak force at both steps of a variant of the scene (``key`` = ``value``),
-    written to ``jam_dt_TAG.json``."""
-    runs = {ratio: _curves(scene, args.layouts, ratio) for ratio in STEPS}
-    a, b = runs[STEPS[0]]["peak"], runs[STEPS[1]]["peak"]
-    shift, se = paired_shift(b, a)
+    """4. and 5.: the peak force at ``args.steps`` of a variant of the scene (``key`` =
+    ``value``), written to ``jam_dt_TAG.json``."""
+    steps = args.steps
+    runs = {ratio: _curves(scene, args.layouts, ratio) for ratio in steps}
+    peaks = [runs[r]["peak"] for r in steps]
     record = {
         key: value,
-        "steps": list(STEPS),
+        "steps": list(steps),
         "layouts": args.layouts,
         "until_s": UNTIL,
-        "peak_mean_n": [float(a.mean()), float(b.mean())],
-        "peak_shift_n": shift,
-        "peak_shift_standard_error_n": se,
-        "peak_n": [a.tolist(), b.tolist()],
-        "wall_s": [runs[r]["wall_s"] for r in STEPS],
-        "status": [runs[r]["status"] for r in STEPS],
+        "peak_mean_n": [float(p.mean()) for p in peaks],
+        "peak_n": [p.tolist() for p in peaks],
+        "wall_s": [runs[r]["wall_s"] for r in steps],
+        "status": [runs[r]["status"] for r in steps],
     }
-    print(
-        f"peak force with {key} {value} over {args.layouts} layouts: "
-        f"{a.mean() / 1e6:.3f} MN at {STEPS[0]}, {b.mean() / 1e6:.3f} MN at {STEPS[1]} "
-        f"({STEPS[0]} minus {STEPS[1]}: {shift / 1e6:+.3f} +- {se / 1e6:.3f})"
-    )
+    print(f"peak force with {key} {value} over {args.layouts} layouts:")
+    for r, p in zip(steps, peaks):
+        print(f"  {r:g} stable_dt: {p.mean() / 1e6:.3f} MN ({runs[r]['wall_s']:.0f} s)")
+    if len(steps) > 1:  # the first against the others
+        shifts = [paired_shift(p, peaks[0]) for p in peaks[1:]]
+        record["peak_shift_n"] = [s for s, _ in shifts]
+        record["peak_shift_standard_error_n"] = [e for _, e in shifts]
+        for r, (shift, se) in zip(steps[1:], shifts):
+            print(f"  {steps[0]:g} minus {r:g}: {shift / 1e6:+.3f} +- {se / 1e6:.3f} MN")
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"jam_dt_{tag}.json"
     path.write_text(json.dumps(record, indent=1))

@@ -19,8 +19,8 @@ What the lane holds and why (the CPU suite runs all of it too):
 - ``test_contact_coupled.py``: the coupled step's 4 x 4 solve against its NumPy twin;
 - ``test_contact_step.py``: the analytic step's spring-dashpot against its NumPy twin (to
   float32's round-off in a float32 run) and the clamped oscillator;
-- ``test_friction.py``, ``test_slip.py``: the laws' kernels against their twins and closed
-  forms;
+- ``test_friction.py``, ``test_slip.py``, ``test_slide_steps.py``: the laws' kernels and a
+  contact's slide in sub-steps against their twins and closed forms;
 - ``test_engine.py``, ``test_budget.py``: stepping, conservation, the energy budget;
 - ``test_resume.py`` (float64): checkpoints and resume, bit for bit on the same arch;
 - ``test_forcing.py``: current, wind, Coriolis and tilt in the step against closed forms, a
@@ -47,6 +47,7 @@ LANE = {
         "tests/test_contact_coupled.py",
         "tests/test_friction.py",
         "tests/test_slip.py",
+        "tests/test_slide_steps.py",
         "tests/test_engine.py",
         "tests/test_budget.py",
         "tests/test_resume.py",

@@ -308,56 +308,25 @@ def contact_force(
     steps = None  # the Euler step's rate-and-state contact: the law with its tangential step
     if isinstance(law, (int, float)):
         mu, theta_new = float(law), 0.0  # no theta is kept
-    elif not analytic:
-        row = law.contact_row()
-        code = method_code(getattr(law, "method", "exponential")) if method is None else method
-        steps = sliding_steps(
-            old.theta,
-            old.slip,
-            slip,
-            old.xi,
-            f_n,
-            k_t,
-            c_t,
-            dt,
-            row["A"],
-            row["B"],
-            row["mu0"],
-            row["v_star"],
-            row["t_c"],
-            row["memory"],
-            row["rest_rule"],
-            code,
-            tol,
-            slide_resolution,
-        )
-        mu, theta_new, v = steps[:3]
     else:
         row = law.contact_row()
         code = method_code(getattr(law, "method", "exponential")) if method is None else method
-        f_trial = abs(k_t * (old.xi + slip * dt) + c_t * slip)
-        impedance = k_t * dt + c_t
-        if exact:
-            f_trial = abs(p_t) / dt
-            impedance = sliding_impedance(k_t, c_t, dt)
-        mu, theta_new, v = contact_friction(
-            old.theta,
-            old.slip,
-            slip,
-            f_trial,
-            f_n,
-            impedance,
-            dt,
-            row["A"],
-            row["B"],
-            row["mu0"],
-            row["v_star"],
-            row["t_c"],
-            row["memory"],
-            row["rest_rule"],
-            code,
-            tol,
-        )
+        rate = [row[k] for k in ("A", "B", "mu0", "v_star", "t_c", "memory", "rest_rule")]
+        if not analytic:
+            steps = sliding_steps(
+                old.theta, old.slip, slip, old.xi, f_n, k_t, c_t, dt, *rate, code, tol,
+                slide_resolution,
+            )  # fmt: skip
+            mu, theta_new, v = steps[:3]
+        else:
+            f_trial = abs(k_t * (old.xi + slip * dt) + c_t * slip)
+            impedance = k_t * dt + c_t
+            if exact:
+                f_trial = abs(p_t) / dt
+                impedance = sliding_impedance(k_t, c_t, dt)
+            mu, theta_new, v = contact_friction(
+                old.theta, old.slip, slip, f_trial, f_n, impedance, dt, *rate, code, tol
+            )
 
     shift = None
     # Whether the cap binds, by the very test of ``stick_or_slide`` and ``tangential_force``

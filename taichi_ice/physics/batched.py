@@ -447,19 +447,26 @@ def contact_friction_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.nd
     Returns:
         ``(N, 3)`` rows (mu, theta_new, V) in the running precision.
     """
+    return _contact_batch(_contact_friction_kernel, inputs, codes, method, 12, 3)
+
+
+def _contact_batch(kernel, inputs, codes, method: int, columns: int, outputs: int):
+    """Run a contact twin's batch ``kernel`` on ``(N, columns)`` real inputs and ``(N, 2)``
+    codes in the running precision (started on the CPU in float64 if none runs); returns
+    its ``(N, outputs)`` rows."""
     if backend.current() is None:
         backend.init("cpu", "f64")
     precision = backend.current()[1]
     real = backend.real_dtype(precision)
     inputs = np.ascontiguousarray(inputs, dtype=real)
     codes = np.ascontiguousarray(codes, dtype=np.int32)
-    if inputs.ndim != 2 or inputs.shape[1] != 12 or codes.shape != (inputs.shape[0], 2):
+    if inputs.ndim != 2 or inputs.shape[1] != columns or codes.shape != (inputs.shape[0], 2):
         raise ValueError(
-            f"inputs must be (N, 12) and codes (N, 2); got {inputs.shape}, {codes.shape}"
+            f"inputs must be (N, {columns}) and codes (N, 2); got {inputs.shape}, {codes.shape}"
         )
-    out = np.zeros((inputs.shape[0], 3), dtype=real)
+    out = np.zeros((inputs.shape[0], outputs), dtype=real)
     if inputs.shape[0]:
-        _contact_friction_kernel(inputs, codes, out, int(method), NEWTON_TOLERANCE[precision])
+        kernel(inputs, codes, out, int(method), NEWTON_TOLERANCE[precision])
     return out
 
 
@@ -496,20 +503,7 @@ def sliding_steps_batch_ti(inputs: Any, codes: Any, method: int = 0) -> np.ndarr
         ``(N, 7)`` rows (mu, theta_new, V, f_t, xi_new, slip_work, damp_work) in the running
         precision.
     """
-    if backend.current() is None:
-        backend.init("cpu", "f64")
-    precision = backend.current()[1]
-    real = backend.real_dtype(precision)
-    inputs = np.ascontiguousarray(inputs, dtype=real)
-    codes = np.ascontiguousarray(codes, dtype=np.int32)
-    if inputs.ndim != 2 or inputs.shape[1] != 14 or codes.shape != (inputs.shape[0], 2):
-        raise ValueError(
-            f"inputs must be (N, 14) and codes (N, 2); got {inputs.shape}, {codes.shape}"
-        )
-    out = np.zeros((inputs.shape[0], 7), dtype=real)
-    if inputs.shape[0]:
-        _sliding_steps_kernel(inputs, codes, out, int(method), NEWTON_TOLERANCE[precision])
-    return out
+    return _contact_batch(_sliding_steps_kernel, inputs, codes, method, 14, 7)
 
 
 # --------------------------------------------------------------------------------------------

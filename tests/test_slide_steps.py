@@ -130,6 +130,7 @@ def test_sub_steps_are_counted_from_the_relaxation_time():
     assert slide_steps(K_T, C_T, DT, 1, 0.0) == 1
     assert slide_steps(K_T, C_T, DT, 0, 0.1) == 1
     assert slide_steps(K_T, C_T, DT, 1, 1e-6) == SLIDE_STEPS_MOST
+    assert slide_steps(K_T, C_T, DT, 1, 1e-300) == SLIDE_STEPS_MOST  # no integer overflow
 
 
 def test_taichi_twin_matches_numpy_on_random_contacts(taichi_runtime):
@@ -161,7 +162,7 @@ def test_taichi_twin_matches_numpy_on_random_contacts(taichi_runtime):
             rng.uniform(0.2, 1.0, n),
             10.0 ** rng.uniform(-6, -4, n),
             rng.uniform(0.5, 5.0, n),
-            rng.choice([0.0, 0.1, 0.02], n),
+            rng.choice([0.0, 0.1, 0.02, 1e-300], n),  # the last: capped at SLIDE_STEPS_MOST
         ]
     )
     codes = np.column_stack([rng.integers(0, 2, n), rng.integers(0, 3, n)])

@@ -182,7 +182,8 @@ def slide_steps(k_t, c_t, dt, memory, resolution):
     rate-and-state batch (``memory`` 0), whose mu does not depend on the slip rate."""
     if memory == 0 or not resolution > 0.0:
         return 1
-    return min(max(math.ceil(k_t * dt / (resolution * c_t)), 1), SLIDE_STEPS_MOST)
+    many = min(k_t * dt / (resolution * c_t), SLIDE_STEPS_MOST)  # before ceil: no overflow
+    return max(math.ceil(many), 1)
 
 
 def sliding_steps(

@@ -135,8 +135,9 @@ def sliding_steps_ti(
     slip_work, damp_work)``."""
     n = 1
     if memory != 0 and resolution > 0.0:
-        n = ti.cast(ti.ceil(k_t * dt / (resolution * c_t)), ti.i32)
-        n = ti.min(ti.max(n, 1), SLIDE_STEPS_MOST)
+        # Clamped before the cast: a tiny resolution must not overflow the integer.
+        many = ti.min(ti.ceil(k_t * dt / (resolution * c_t)), SLIDE_STEPS_MOST)
+        n = ti.max(ti.cast(many, ti.i32), 1)
     h = dt / n
     x = xi
     th = theta

@@ -802,6 +802,30 @@ def with_ice(scene, **ice):
 
 
 @pytest.mark.parametrize("stepping", ["worlds", "bodies"])
+def test_a_world_with_its_slide_in_sub_steps_is_the_same_alone_and_in_a_batch(f64, stepping):
+    """``[ice] slide_resolution`` is a world's data: rate-and-state clusters with and without
+    sub-steps share a batch, each moving bit for bit as alone; and the sub-steps were taken
+    (the same cluster without them moves otherwise)."""
+    plain = [scene_from_dict(cluster_scene_dict(s, 3 + s, law="rate-state")) for s in range(2)]
+    scenes = [with_ice(plain[0], slide_resolution=0.05), plain[1]]
+    dt = min(s.dt for s in scenes)
+    batch = World(scenes, dt=dt, stepping=stepping)
+    batch.advance(400)
+    batch.check()
+    for w, scene in enumerate(scenes):
+        alone = World([scene], dt=dt, stepping=stepping)
+        alone.advance(400)
+        sl = batch.world_slices()[w]
+        np.testing.assert_array_equal(alone.positions(), batch.positions()[sl])
+        np.testing.assert_array_equal(alone.velocities(), batch.velocities()[sl])
+        np.testing.assert_array_equal(alone.energies()[0], batch.energies()[w])
+    assert batch.energies()[0][EnergyTerm.FRICTION] > 0  # it slid
+    one_step = World([plain[0]], dt=dt, stepping=stepping)
+    one_step.advance(400)
+    assert not np.array_equal(one_step.positions(), batch.positions()[batch.world_slices()[0]])
+
+
+@pytest.mark.parametrize("stepping", ["worlds", "bodies"])
 def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
     """The contact law's values are data, not code: two squares colliding with k_e and 4 k_e
     (and other viscosity, stick spring and dashpot) run in one batch, on one layout (one set

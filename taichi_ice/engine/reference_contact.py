@@ -339,7 +339,7 @@ def contact_force(
     elif steps is not None:
         f_t, xi_new, slip_work, damp_work = steps[3:]
         sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n
-        if slide_steps(k_t, c_t, dt, law.contact_row()["memory"], slide_resolution) > 1:
+        if slide_steps(k_t, c_t, dt, row["memory"], slide_resolution) > 1:
             sliding = slip_work > 0.0  # in sub-steps: it slid in one of them
     else:
         sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n

@@ -803,11 +803,13 @@ def with_ice(scene, **ice):
 
 @pytest.mark.parametrize("stepping", ["worlds", "bodies"])
 def test_a_world_with_its_slide_in_sub_steps_is_the_same_alone_and_in_a_batch(f64, stepping):
-    """``[ice] slide_resolution`` is a world's data: rate-and-state clusters with and without
-    sub-steps share a batch, each moving bit for bit as alone; and the sub-steps were taken
-    (the same cluster without them moves otherwise)."""
+    """``[ice] slide_resolution`` is a world's data: rate-and-state clusters with their slide
+    in sub-steps (the default) and in one step (resolution 0) share a batch, each moving bit
+    for bit as alone; and the sub-steps were taken (the same cluster in one step moves
+    otherwise)."""
     plain = [scene_from_dict(cluster_scene_dict(s, 3 + s, law="rate-state")) for s in range(2)]
-    scenes = [with_ice(plain[0], slide_resolution=0.05), plain[1]]
+    assert plain[0].ice.slide_resolution > 0
+    scenes = [plain[0], with_ice(plain[1], slide_resolution=0.0)]
     dt = min(s.dt for s in scenes)
     batch = World(scenes, dt=dt, stepping=stepping)
     batch.advance(400)
@@ -820,7 +822,7 @@ def test_a_world_with_its_slide_in_sub_steps_is_the_same_alone_and_in_a_batch(f6
         np.testing.assert_array_equal(alone.velocities(), batch.velocities()[sl])
         np.testing.assert_array_equal(alone.energies()[0], batch.energies()[w])
     assert batch.energies()[0][EnergyTerm.FRICTION] > 0  # it slid
-    one_step = World([plain[0]], dt=dt, stepping=stepping)
+    one_step = World([with_ice(plain[0], slide_resolution=0.0)], dt=dt, stepping=stepping)
     one_step.advance(400)
     assert not np.array_equal(one_step.positions(), batch.positions()[batch.world_slices()[0]])
 

@@ -43,10 +43,10 @@ SCENES = {
     "pushed_field": 2.6,
     "pillar": 0.6,
 }
-LAWS = {"coulomb": Coulomb(mu=0.5), "rate-state": RateState(), "rate-state-sub-steps": RateState()}
-# "rate-state-sub-steps": the slide of a rate-and-state contact in sub-steps, [ice]
-# slide_resolution = SLIDE (``slip.sliding_steps_ti``).
-SLIDE = 0.05
+LAWS = {"coulomb": Coulomb(mu=0.5), "rate-state": RateState(), "rate-state-one-step": RateState()}
+# "rate-state" takes a sliding contact's step in sub-steps ([ice] slide_resolution, default
+# 0.025: ``slip.sliding_steps_ti``); "rate-state-one-step" in one step, slide_resolution = SLIDE.
+SLIDE = 0.0
 RTOL = {"f64": 1e-12, "f32": 1e-5}  # of the quantity's scale (positions: the scene's size)
 RS_RTOL = {"f64": 1e-9, "f32": 1e-5}
 
@@ -61,7 +61,7 @@ integrator, slide = sys.argv[5], float(sys.argv[6])
 backend.init("cpu", precision)
 friction = Coulomb(mu=0.5) if law == "coulomb" else RateState()
 scene = load_scenario(name)
-if law == "rate-state-sub-steps":
+if law == "rate-state-one-step":
     raw = {**scene.raw, "ice": {**scene.raw.get("ice", {}), "slide_resolution": slide}}
     scene = scene_from_dict(raw, source=name)
 sim = Simulation(
@@ -100,7 +100,7 @@ def on_cpu(name: str, law: str, until: float, precision: str, integrator: str) -
 
 def on_here(name: str, law: str, until: float, arch: str, precision: str, integrator: str) -> dict:
     scene = load_scenario(name)
-    if law == "rate-state-sub-steps":
+    if law == "rate-state-one-step":
         raw = {**scene.raw, "ice": {**scene.raw.get("ice", {}), "slide_resolution": SLIDE}}
         scene = scene_from_dict(raw, source=name)
     sim = Simulation(
@@ -128,7 +128,7 @@ def test_a_scene_on_the_gpu_equals_the_cpu(name, law, gpu):
 
 
 @pytest.mark.parametrize("integrator", ["coupled", "midstep"])
-@pytest.mark.parametrize("law", ["coulomb", "rate-state"])  # they take no sub-steps
+@pytest.mark.parametrize("law", ["coulomb", "rate-state"])  # these steps take no sub-steps
 @pytest.mark.parametrize("name", ["two_squares", "pillar"])
 def test_the_coupled_step_on_the_gpu_equals_the_cpu(name, law, integrator, gpu):
     """The coupled step's 4 x 4 exponential (plain arithmetic and a square root) and its 1D

@@ -6,6 +6,7 @@ and a paper run resumed skips what it finished."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 
 import h5py
@@ -107,6 +108,12 @@ def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp
     other["simulation"]["seed"] = 1
     with pytest.raises(RunFileError, match="another run"):
         Simulation(scene_from_dict(other)).run(until=UNTIL, out=path, resume=True)
+    # The same text whose [ice] resolved otherwise (a default that changed, as slide_resolution
+    # did from 0 to 0.025): another run, though its text is the same.
+    resolved = dataclasses.replace(scene, ice=dataclasses.replace(scene.ice, slide_resolution=0.0))
+    assert resolved.text == scene.text and resolved.ice != scene.ice
+    with pytest.raises(RunFileError, match="its scene differs"):
+        Simulation(resolved).run(until=UNTIL, out=path, resume=True)
     # Another integrator steps another state (the analytic step's position impulses).
     with pytest.raises(RunFileError, match="its integrator differs"):
         Simulation(scene, integrator="analytic").run(until=UNTIL, out=path, resume=True)
@@ -118,6 +125,27 @@ def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp
     ckpt.remove(ckpt.path_for(path))
     with pytest.raises(RunFileError, match="no checkpoint"):
         Simulation(scene).run(until=UNTIL, out=path, resume=True)
+
+
+def test_ensembles_and_sweeps_tell_a_changed_default_from_the_same_scene():
+    """What an ensemble's or paper's ledger and a sweep compare on resume: the same text whose
+    [ice] resolved otherwise (slide_resolution's default went from 0 to 0.025) is another
+    scene to each, and the same scene is the same."""
+    from types import SimpleNamespace
+
+    from taichi_ice.experiments.ledger import scene_digest
+    from taichi_ice.experiments.sweep.run import _identity
+
+    scene = jam()
+    again = scene_from_dict(copy.deepcopy(dict(scene.raw)))
+    resolved = dataclasses.replace(scene, ice=dataclasses.replace(scene.ice, slide_resolution=0.0))
+    assert resolved.text == scene.text == again.text
+    assert scene_digest(again) == scene_digest(scene) != scene_digest(resolved)
+
+    def sweep_of(s):
+        return _identity(SimpleNamespace(scene=s, until=1.0, window=None), "cpu", "f64")
+
+    assert sweep_of(again) == sweep_of(scene) != sweep_of(resolved)
 
 
 # --------------------------------------------------------------------------------------------

@@ -74,8 +74,8 @@ def test_the_scene_variants_change_only_what_they_name():
     slid = jam_dt._scene(slide=0.1)
     assert paper.friction.below_v_star == "paper" and healing.friction.below_v_star == "healing"
     assert damped.ice.tangential_damping == 0.35 and paper.ice.tangential_damping == 0.25
-    assert slid.ice.slide_resolution == 0.1 and paper.ice.slide_resolution == 0.0
-    assert slid.ice.tangential_damping == 0.25 and damped.ice.slide_resolution == 0.0
+    assert slid.ice.slide_resolution == 0.1 and paper.ice.slide_resolution == 0.025
+    assert slid.ice.tangential_damping == 0.25 and damped.ice.slide_resolution == 0.025
     assert damped.friction == paper.friction == slid.friction and healing.ice == paper.ice
     for variant in (damped, slid):
         assert [b.name for b in variant.bodies] == [b.name for b in paper.bodies]

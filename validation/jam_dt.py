@@ -193,7 +193,12 @@ def main(argv=None) -> int:
         r = args.slide_resolution
         tag = f"slide_{r:g}" + ("" if args.steps == STEPS else "_" + "_".join(map(str, args.steps)))
         return _variant(args, _scene(slide=r), "slide_resolution", r, tag)
-    record: dict = {"steps": list(STEPS), "layouts": args.layouts, "until_s": UNTIL}
+    record: dict = {
+        "steps": list(STEPS),
+        "layouts": args.layouts,
+        "until_s": UNTIL,
+        "slide_resolution": _scene().ice.slide_resolution,
+    }
 
     # 1. Mean force curves.
     runs = {ratio: _curves(_scene(), args.layouts, ratio) for ratio in STEPS}
@@ -296,6 +301,7 @@ def _variant(args, scene, key: str, value, tag: str) -> int:
     peaks = [runs[r]["peak"] for r in steps]
     record = {
         key: value,
+        "slide_resolution": scene.ice.slide_resolution,
         "steps": list(steps),
         "layouts": args.layouts,
         "until_s": UNTIL,

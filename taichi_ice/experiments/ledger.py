@@ -31,8 +31,9 @@ FORMAT_VERSION = "2"  # 2: a digest of the record (a damaged ledger is refused)
 
 
 def scene_digest(scene) -> str:
-    """SHA-1 of a scene's TOML text: what a resume compares (the text itself is long)."""
-    return hashlib.sha1(scene.text.encode()).hexdigest()
+    """SHA-1 of a scene's text and resolved ice (``Scene.identity``): what a resume compares
+    (the text itself is long)."""
+    return hashlib.sha1(scene.identity.encode()).hexdigest()
 
 
 def _plain(value: Any) -> Any:

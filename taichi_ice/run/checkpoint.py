@@ -14,7 +14,8 @@ declaration (``taichi_ice.engine.schema``) as fields come and go:
   same steps as in a run that was never stopped;
 - ``/host/initial_energy``: the energy table at t = 0 (the budget's starting capital);
 - attributes: ``steps``, ``time``, ``dt``, ``precision``, ``n_samples`` and ``n_frames``
-  (rows of each run file written when it was taken, JSON lists), ``scenarios``,
+  (rows of each run file written when it was taken, JSON lists), ``scenarios`` (each
+  scene's text and the ``[ice]`` values it resolved to: ``Scene.identity``),
   ``frictions`` and ``grids`` (the digests of the scenes' current and wind grid files) (JSON
   lists: a resume must be the same run), ``run_ids`` (the ``run_id`` of
   each run file, JSON list: a resume must continue the same files), ``format_version`` and
@@ -40,7 +41,7 @@ from ..errors import OutputError, RunFileError
 from ..scene.table import printable
 from .runfile_read import DAMAGE
 
-FORMAT_VERSION = "11"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "12"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
 #                       5: a body's rotation (body_rot) instead of its turned outline;
@@ -51,6 +52,8 @@ FORMAT_VERSION = "11"  # 2: contact memory single-buffered (no buffer axis, no c
 #                       9: fields at the layout's capacities (assemble.capacity)
 #                       10: the forcing's energy columns and clock (body_time)
 #                       11: the analytic steps' contact booking (contact_booking)
+#                       12: each scene with the [ice] it resolved to (Scene.identity),
+#                           since a default changed (slide_resolution, 2026-11-27)
 SUFFIX = ".ckpt"
 
 
@@ -67,7 +70,8 @@ def _fields(container) -> dict:
 def identity(sim) -> dict:
     """What a resumed run must share with the run it continues (JSON-able)."""
     return {
-        "scenarios": [s.text for s in sim.scenes],
+        # the text and the [ice] it resolved to: a default that changed is another run
+        "scenarios": [s.identity for s in sim.scenes],
         "frictions": [json.dumps(s.friction.to_dict(), sort_keys=True) for s in sim.scenes],
         "dt": float(sim.dt),
         "precision": sim.precision,

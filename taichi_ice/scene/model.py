@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -336,6 +337,15 @@ class Scene:
     def n_bodies(self) -> int:
         """Number of bodies."""
         return len(self.bodies)
+
+    @cached_property
+    def identity(self) -> str:
+        """The scene's text and the ``[ice]`` values it resolved to, defaults included: what a
+        resumed run, ensemble or sweep must share with the one it continues. A default that
+        changed (``slide_resolution``, 0 -> 0.025 on 2026-11-27) makes the same text another
+        run."""
+        ice = json.dumps(dataclasses.asdict(self.ice), sort_keys=True)
+        return f"{self.text}\n# [ice] as resolved: {ice}\n"
 
     @cached_property
     def names(self) -> tuple[str, ...]:

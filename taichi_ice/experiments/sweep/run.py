@@ -155,7 +155,9 @@ class SweepResult:
 def _identity(sweep: Sweep, arch: str, precision: str) -> dict:
     """What every world's result depends on besides its key: a resume must match it."""
     return {
-        "scene_sha1": hashlib.sha1(sweep.scene.text.encode()).hexdigest(),
+        # the text and the [ice] it resolved to (Scene.identity): a changed default is
+        # another sweep
+        "scene_sha1": hashlib.sha1(sweep.scene.identity.encode()).hexdigest(),
         "until": sweep.until,
         "window": sweep.window,
         "arch": arch,

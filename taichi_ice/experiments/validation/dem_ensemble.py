@@ -355,12 +355,19 @@ def run(
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "dem_ensemble.json"
     start = time.perf_counter()
+    from . import dem_scenes
+
+    # Records made before [ice] slide_resolution became 0.025 (2026-11-27) took the slide in
+    # one step and do not name it: their runs are not reused under another resolution.
+    slide = dem_scenes.pillar("rate-state").ice.slide_resolution
     kept = {}
     if reuse and path.is_file():
         old = json.loads(path.read_text())
-        same = (old["settings"]["layouts"], old["settings"]["until_s"]) == (
+        was = old["settings"].get("slide_resolution", 0.0)
+        same = (old["settings"]["layouts"], old["settings"]["until_s"], was) == (
             cfg["layouts"],
             cfg["until"],
+            slide,
         )
         if same:
             kept = {(r["law"], r["integrator"], round(r["nominal"], 6)): r for r in old["runs"]}
@@ -381,6 +388,7 @@ def run(
         "settings": {
             "layouts": cfg["layouts"],
             "until_s": cfg["until"],
+            "slide_resolution": slide,
             "laws": list(cfg["laws"]),
             "cases": [list(c) for c in cfg["cases"]],
             "comparisons": [[list(a), list(b)] for a, b in cfg["comparisons"]],

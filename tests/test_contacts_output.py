@@ -221,28 +221,53 @@ def test_probe_force_of_the_step_after_each_frame_is_the_sum_of_its_rows(ran, f6
 
 def test_stuck_rows_are_below_the_cap_and_sliding_rows_at_it(ran):
     """A stuck contact's tangential force is below mu F_n (Coulomb: the scene's 0.5) and it
-    does not slip; a sliding one's is mu F_n to round-off and it slips. Both occur."""
+    does not slip; a sliding one's is mu F_n to round-off and it slips. Both occur. Under
+    rate and state the slide takes sub-steps (``[ice] slide_resolution``): a row's force and
+    mu are the step's means, at the cap where the contact slid through the step (a row
+    whose slide started within the step would be below it: none is at this scene's frames,
+    10 sliding rows of 10 at the cap; in one step,
+    ``test_in_one_step_every_sliding_row_is_at_the_cap``)."""
     law, _sim, _path, run, _engine = ran
     c = run["contacts"]
-    mu = np.full(len(c["mu"]), MU) if law == "coulomb" else c["mu"]
+    assert_rows_hold_the_cap(c)
     if law == "coulomb":
         np.testing.assert_array_equal(c["mu"], MU)
-    cap = mu * c["force_normal"]
-    stuck, sliding = c["stuck"] == 1, c["stuck"] == 0
-    assert set(np.unique(c["stuck"])) == {0, 1}
-    assert stuck.sum() >= 10 and sliding.sum() >= 5
-    assert np.all(np.abs(c["force_tangential"][stuck]) <= cap[stuck] * (1.0 + 1e-12))
-    np.testing.assert_array_equal(c["slip_rate"][stuck], 0.0)
-    np.testing.assert_allclose(np.abs(c["force_tangential"][sliding]), cap[sliding], rtol=1e-12)
-    assert np.all(c["slip_rate"][sliding] != 0.0)
-    # The slip is against the force: friction opposes the sliding.
-    assert np.all(c["slip_rate"][sliding] * c["force_tangential"][sliding] < 0.0)
     if law == "rate-state":
         # theta where the law acts (a sliding interface), never positive (DESIGN: it starts
         # at -B ln(V/V*) <= 0 and relaxes toward it); none on a stuck contact.
+        stuck, sliding = c["stuck"] == 1, c["stuck"] == 0
         assert np.all(np.isnan(c["theta"][stuck]))
         theta = c["theta"][sliding]
         assert np.isfinite(theta).sum() >= 3 and np.all(theta[np.isfinite(theta)] <= 0.0)
+
+
+def assert_rows_hold_the_cap(c: dict) -> None:
+    """Stuck rows below ``mu F_n`` and not slipping; sliding rows slipping against their
+    force, at the cap to round-off."""
+    cap = c["mu"] * c["force_normal"]
+    stuck, sliding = c["stuck"] == 1, c["stuck"] == 0
+    assert set(np.unique(c["stuck"])) == {0, 1}
+    assert stuck.sum() >= 10 and sliding.sum() >= 5
+    force = np.abs(c["force_tangential"])
+    assert np.all(force[stuck] <= cap[stuck] * (1.0 + 1e-12))
+    np.testing.assert_array_equal(c["slip_rate"][stuck], 0.0)
+    assert np.all(force[sliding] <= cap[sliding] * (1.0 + 1e-12))
+    at_cap = np.isclose(force[sliding], cap[sliding], rtol=1e-12, atol=0.0)
+    print(f"{at_cap.sum()} of {sliding.sum()} sliding rows at the cap, {stuck.sum()} stuck")
+    assert np.all(at_cap), (at_cap.sum(), sliding.sum())
+    assert np.all(c["slip_rate"][sliding] != 0.0)
+    # The slip is against the force: friction opposes the sliding.
+    assert np.all(c["slip_rate"][sliding] * c["force_tangential"][sliding] < 0.0)
+
+
+def test_in_one_step_every_sliding_row_is_at_the_cap(tmp_path):
+    """Rate and state with its slide in one step (``slide_resolution = 0``): every sliding
+    row's force is its mu F_n to round-off, as a Coulomb row's."""
+    raw = jam_dict("rate-state")
+    raw["ice"] = {**raw.get("ice", {}), "slide_resolution": 0.0}
+    path = tmp_path / "one_step.h5"
+    Simulation(scene_from_dict(raw, source="jam one step"), contacts=True).run(out=path)
+    assert_rows_hold_the_cap(read_run(path)["contacts"])
 
 
 def test_geometry_is_the_overlap_of_the_two_floes_at_the_frame(ran, f64):

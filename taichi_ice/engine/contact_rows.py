@@ -209,13 +209,17 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
         area (m^2; crushed area included).
         force_normal (N, >= 0) and force_tangential (N): the force on ``body_b`` along
         ``normal`` and along the tangent ``(-normal_y, normal_x)``; ``body_a`` takes the
-        opposite. mu: the friction coefficient of the step.
+        opposite: the step's mean where a sliding rate-and-state contact took its step in
+        sub-steps (``[ice] slide_resolution``). mu: the friction coefficient of the step (the
+        mean over its sub-steps: the force is ``mu F_n`` where the contact slid through the
+        whole step, below it where its slide started or stopped within the step).
         slip_rate: the rate the surfaces slide at along the tangent (m/s, signed; 0 if
-        stuck): the law's V in a rate-and-state batch, else the slide of the step that the
+        stuck): the law's V in a rate-and-state batch (that of the last sub-step, the rate
+        the step leaves, as theta), else the slide of the step that the
         stick spring does not take up, over dt. theta: the rate-and-state variable the step
         leaves (dimensionless), NaN for a Coulomb world and for a contact with no sliding
         interface. stuck: 1 if the tangential force is the stick spring-dashpot's (below
-        ``mu F_n``), 0 if it slides (capped at ``mu F_n``).
+        ``mu F_n``), 0 if it slides (capped at ``mu F_n``; in sub-steps, if its last one slid).
     """
     layout = world.layout
     model = ReferenceModel.from_batch(world.batch)

@@ -82,14 +82,16 @@ class ContactForce(NamedTuple):
         approach: approach speed along the normal (m/s), positive when closing.
         slip: tangential velocity of the partner relative to the owner (m/s), along
             ``tangent = (-normal_y, normal_x)``.
-        mu: friction coefficient used. normal_force: ``F_n`` (N), clamped at 0.
+        mu: friction coefficient of the step (the mean over its sub-steps where the slide
+            took them, ``slip.sliding_steps``). normal_force: ``F_n`` (N), clamped at 0.
         elastic_force: ``k_e A`` (N). tangential_force: along the tangent, on the partner (N).
         force: ``(2,)`` total force on the partner (N); the owner gets ``-force``.
         torque_owner, torque_partner: about each centroid (N m).
         memory: the contact's new memory (stretch, area, stored elastic energy, theta).
         slip_work: frictional work of the step (J). viscous_work: dashpot work (J).
         crushing_work: work on the crushed overlap (J). sliding_rate: V of the law (m/s,
-            signed along the tangent; 0 for Coulomb).
+            signed along the tangent; 0 for Coulomb; the last sub-step's where the slide
+            took sub-steps).
         shift, shift_torque_owner, shift_torque_partner: the analytic step's position
             impulse on the partner as a force, ``2 Q / dt^2`` (N), and its torques (None and
             0 for the Euler step).
@@ -305,6 +307,7 @@ def contact_force(
             scale = cap_n / f_n
             f_n, f_el, q_n = cap_n, f_el * scale, q_n * scale
     theta_new, v = NO_INTERFACE, 0.0
+    mu_step = None  # the step's mean mu, where sub-steps took it
     steps = None  # the Euler step's rate-and-state contact: the law with its tangential step
     if isinstance(law, (int, float)):
         mu, theta_new = float(law), 0.0  # no theta is kept
@@ -337,10 +340,12 @@ def contact_force(
             p_t, q_t, old.xi, xi1, slip, dt, k_t, c_t, mu * f_n * dt, mu * q_n
         )
     elif steps is not None:
-        f_t, xi_new, slip_work, damp_work = steps[3:]
+        f_t, xi_new, slip_work, damp_work = steps[3:7]
         sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n
         if slide_steps(k_t, c_t, dt, row["memory"], slide_resolution) > 1:
-            sliding = slip_work > 0.0  # in sub-steps: it slid in one of them
+            # in sub-steps: the step's mean mu, and sliding if its last sub-step slid (the
+            # state it leaves, as theta and the slip rate)
+            mu_step, sliding = steps[7:]
     else:
         sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n
         f_t, xi_new, slip_work, damp_work = tangential_force(old.xi, slip, dt, k_t, c_t, mu * f_n)
@@ -396,7 +401,7 @@ def contact_force(
         kind=ov.kind,
         approach=approach,
         slip=slip,
-        mu=mu,
+        mu=mu if mu_step is None else mu_step,
         normal_force=f_n,
         elastic_force=f_el,
         tangential_force=f_t,

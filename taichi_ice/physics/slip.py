@@ -227,18 +227,25 @@ def sliding_steps(
             slide_resolution``; ``slide_steps``), 0 for one step.
 
     Returns:
-        ``(mu, theta_new, V, f_t, xi_new, slip_work, damp_work)``: the last sub-step's mu,
-        theta and slip rate; the mean tangential force over the step on the partner (N:
-        the impulse the bodies take, over dt); the stretch at its end; the frictional work
-        and the dashpot's, plus (for ``n`` > 1) what the sub-steps' backward Euler dissipates
-        beyond the one ``contact_law.contact_work`` books for the whole step, so that the
-        budget closes: ``-f_t slip dt = slip_work + damp_work + k_t xi_new (xi_new - xi)``.
+        ``(mu, theta_new, V, f_t, xi_new, slip_work, damp_work, mu_step, slid)``: the last
+        sub-step's mu, theta and slip rate (the memory the next step starts from); the mean
+        tangential force over the step on the partner (N: the impulse the bodies take, over
+        dt); the stretch at its end; the frictional work and the dashpot's, plus (for ``n`` >
+        1) what the sub-steps' backward Euler dissipates beyond the one
+        ``contact_law.contact_work`` books for the whole step, so that the budget closes:
+        ``-f_t slip dt = slip_work + damp_work + k_t xi_new (xi_new - xi)``; and, for a
+        contact row, the step's mean mu over its sub-steps (the mean force is ``mu_step f_n``
+        where the contact slid through the whole step) and whether its last sub-step slid
+        (at the cap: the state the step leaves, as theta and V are). With ``n`` 1,
+        ``mu_step`` is ``mu``. (The Taichi twin returns the first seven: the kernel writes
+        no rows.)
     """
     n = slide_steps(k_t, c_t, dt, memory, resolution)
     h = dt / n
     x, th, last = xi, theta, last_slip
     mu = v = 0.0
-    f_sum = slip_work = damp_work = held = 0.0
+    f_sum = slip_work = damp_work = held = mu_sum = 0.0
+    slid = False
     for _ in range(n):
         f_trial = abs(k_t * (x + slip * h) + c_t * slip)
         mu, th, v = contact_friction(
@@ -247,16 +254,18 @@ def sliding_steps(
         )  # fmt: skip
         f, x_new, sw, dw = tangential_force(x, slip, h, k_t, c_t, mu * f_n)
         f_sum += f
+        mu_sum += mu
+        slid = sw > 0.0
         slip_work += sw
         damp_work += dw
         held += 0.5 * k_t * (x_new - x) * (x_new - x)
         x, last = x_new, v
-    f_t = f_sum
+    f_t, mu_step = f_sum, mu
     if n > 1:
-        f_t = f_sum / n
+        f_t, mu_step = f_sum / n, mu_sum / n
         step = x - xi
         damp_work += held - 0.5 * k_t * step * step
-    return mu, th, v, f_t, x, slip_work, damp_work
+    return mu, th, v, f_t, x, slip_work, damp_work, mu_step, slid
 
 
 __all__ = [

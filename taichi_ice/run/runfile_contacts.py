@@ -26,6 +26,11 @@ variable                  unit       meaning
 A frame's rows are the contacts of the step that starts at the frame's time: their forces
 act over ``(t, t + dt]``. ``contact`` holds each row's index (a coordinate, so that netCDF
 readers name the dimension); ``xarray.open_dataset(path, group="contacts")`` reads it.
+Where a sliding rate-and-state contact takes its step in sub-steps (``[ice]
+slide_resolution``), its force and ``mu`` are the step's means over them, and ``slip_rate``,
+``theta`` and ``stuck`` the state its last sub-step leaves: a sliding row is at the cap
+``|F_t| = mu F_n`` if it slid through the whole step, below it where its slide started
+within the step.
 
 Written with the frames, in the same open of the file (``RunWriter``): a reader sees as many
 frames in ``/contacts`` as in ``/frames``.

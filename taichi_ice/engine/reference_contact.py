@@ -342,7 +342,7 @@ def contact_force(
     elif steps is not None:
         f_t, xi_new, slip_work, damp_work = steps[3:7]
         sliding = abs(-k_t * (old.xi + slip * dt) - c_t * slip) > mu * f_n
-        if slide_steps(k_t, c_t, dt, row["memory"], slide_resolution) > 1:
+        if slide_steps(k_t, c_t, dt, row["memory"], slide_resolution, old.theta) > 1:
             # in sub-steps: the step's mean mu, and sliding if its last sub-step slid (the
             # state it leaves, as theta and the slip rate)
             mu_step, sliding = steps[7:]

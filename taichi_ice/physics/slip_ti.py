@@ -134,7 +134,8 @@ def sliding_steps_ti(
     """Taichi twin of :func:`slip.sliding_steps`; returns ``(mu, theta_new, V, f_t, xi_new,
     slip_work, damp_work)``."""
     n = 1
-    if memory != 0 and resolution > 0.0:
+    # A contact's first step is taken whole (``slip.slide_steps``).
+    if memory != 0 and resolution > 0.0 and theta < NEW_CONTACT_ABOVE:
         # Clamped before the cast: a tiny resolution must not overflow the integer.
         many = ti.min(ti.ceil(k_t * dt / (resolution * c_t)), SLIDE_STEPS_MOST)
         n = ti.max(ti.cast(many, ti.i32), 1)

@@ -131,7 +131,8 @@ def test_sub_steps_are_counted_from_the_relaxation_time():
     assert slide_steps(K_T, C_T, DT, 1, 0.0) == 1
     # A contact's first step is taken whole: its normal force is the whole step's overlap's.
     assert slide_steps(K_T, C_T, DT, 1, 0.1, NEW_CONTACT) == 1
-    assert step(0.0, 0.05, DT, 0.01, theta=NEW_CONTACT) == step(0.0, 0.05, DT, 0.0, theta=NEW_CONTACT)
+    birth = step(0.0, 0.05, DT, 0.01, theta=NEW_CONTACT)
+    assert birth == step(0.0, 0.05, DT, 0.0, theta=NEW_CONTACT)
     assert slide_steps(K_T, C_T, DT, 0, 0.1) == 1
     assert slide_steps(K_T, C_T, DT, 1, 1e-6) == SLIDE_STEPS_MOST
     assert slide_steps(K_T, C_T, DT, 1, 1e-300) == SLIDE_STEPS_MOST  # no integer overflow

@@ -109,10 +109,12 @@ class IceProperties:
         slide_resolution: a sliding rate-and-state contact's step is taken in sub-steps of
             at most this fraction of its stick spring's relaxation time ``c_t / k_t``
             (``slip.sliding_steps``; the Euler step), so that the slip rate the law sees does
-            not depend on dt through the spring's backward-Euler relaxation (default 0.025:
-            at it the default step and a quarter of it give the pillar's rate-and-state peak
-            force -1.0 % [-9.9, +7.9] apart over 128 layouts, where in one step they differ by
-            +18 %, docs/accuracy.md); 0: one step (the default until this one). Dimensionless, >= 0.
+            not depend on dt through the spring's backward-Euler relaxation (a contact's first
+            step is taken whole). Default 0.025: over 128 pillar layouts the default step and a
+            quarter of it then give rate and state's peak force +7.3 % [-1.7, +16.3] apart and
+            each within 3.6 % of a sixteenth step, where in one step they differ by +18.1 %
+            [+8.2, +27.9] (docs/accuracy.md); 0: one step (the default before 2026-11-27).
+            Dimensionless, >= 0.
         crushing_strength: the ice's strength (Pa), or None (default: no limit). A contact's
             normal elastic force is capped at strength x thickness x contact width; overlap
             beyond the cap is crushed, not recovered, and its work is the budget's

@@ -395,7 +395,7 @@ class ContactStage(ContactLists):
                     )
             elif ti.static(self.layout.rate_state):
                 # The law and the capped spring-dashpot together, in sub-steps that resolve
-                # the slide where ``[ice] slide_resolution`` asks (one step by default).
+                # the slide as ``[ice] slide_resolution`` asks (0.025 by default; 0: one step).
                 mu, theta_new, slip_rate, f_t, xi_new, slip_work, damp_work = sliding_steps_ti(
                     theta,
                     last_slip,

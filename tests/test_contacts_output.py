@@ -251,7 +251,6 @@ def assert_rows_hold_the_cap(c: dict) -> None:
     force = np.abs(c["force_tangential"])
     assert np.all(force[stuck] <= cap[stuck] * (1.0 + 1e-12))
     np.testing.assert_array_equal(c["slip_rate"][stuck], 0.0)
-    assert np.all(force[sliding] <= cap[sliding] * (1.0 + 1e-12))
     at_cap = np.isclose(force[sliding], cap[sliding], rtol=1e-12, atol=0.0)
     print(f"{at_cap.sum()} of {sliding.sum()} sliding rows at the cap, {stuck.sum()} stuck")
     assert np.all(at_cap), (at_cap.sum(), sliding.sum())

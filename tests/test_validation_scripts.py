@@ -9,6 +9,7 @@ import importlib.util
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from taichi_ice import load_scenario
 
@@ -79,3 +80,14 @@ def test_the_scene_variants_change_only_what_they_name():
     assert damped.friction == paper.friction == slid.friction and healing.ice == paper.ice
     for variant in (damped, slid):
         assert [b.name for b in variant.bodies] == [b.name for b in paper.bodies]
+
+
+def test_first_seed_gives_layouts_the_default_ones_do_not_share():
+    jam_dt = _script("jam_dt")
+    paper = jam_dt._scene()
+    default = jam_dt._seeds(paper, 128)
+    assert default[0] == paper.simulation.seed and len(set(default)) == 128
+    fresh = jam_dt._seeds(paper, 128, first=1000)
+    assert fresh == list(range(1000, 1128)) and not set(fresh) & set(default)
+    with pytest.raises(SystemExit):  # argparse's error: the option needs a variant
+        jam_dt.main(["--out", "unused", "--first-seed", "1000"])

@@ -30,7 +30,10 @@ part. Four measurements that can:
    impedance ``k_t dt + c_t``; ``slip.sliding_steps``), written to
    ``jam_dt_slide_R.json`` (``jam_dt_slide_R_STEPS.json`` with ``--steps``, e.g. ``--steps
    0.0125`` for the finest step alone, ~35 minutes at ``--slide-resolution 0``). About 12
-   minutes at 0.025.
+   minutes at 0.025. ``--first-seed N`` runs the layouts of seeds ``N, N + 1, ...`` instead
+   (``..._seedsN.json``): a second sample that shares no layout with the first. Each
+   record keeps every layout's peak force, frictional energy and whether its jam was
+   released (``experiments.metrics``).
 
 Writes ``jam_dt.json`` and ``jam_dt.png`` and prints the tables (docs/accuracy.md quotes
 them). About 25 minutes on 2 cores at the defaults; ``--layouts 8 --branch-layouts 4`` for a
@@ -109,12 +112,16 @@ def _scene(damping: float | None = None, rule: str | None = None, slide: float |
     return scene_from_dict(raw, source="pillar").with_friction(scene.friction)
 
 
-def _seeds(scene, n: int) -> list[int]:
+def _seeds(scene, n: int, first: int | None = None) -> list[int]:
+    """The paper's layout and ``n - 1`` reseeded ones (dem_ensemble's), or with ``first``
+    the seeds ``first, ..., first + n - 1`` (layouts none of the others share)."""
+    if first is not None:
+        return list(range(first, first + n))
     own = scene.simulation.seed  # the paper's layout first, as dem_ensemble's
     return [own, *[s for s in range(n + 1) if s != own][: n - 1]]
 
 
-def _curves(scene, layouts: int, ratio: float) -> dict:
+def _curves(scene, layouts: int, ratio: float, first: int | None = None) -> dict:
     from taichi_ice.engine.options import Options
     from taichi_ice.experiments.ensemble import run_ensemble
     from taichi_ice.experiments.metrics import probe_force_magnitude
@@ -122,13 +129,15 @@ def _curves(scene, layouts: int, ratio: float) -> dict:
 
     dt = dem_accuracy.field_step(ratio, scene.stable_dt)
     start = time.perf_counter()
-    ens = run_ensemble(
-        scene, _seeds(scene, layouts), until=UNTIL, options=Options(dt=dt, force_dt=True)
-    )
+    seeds = _seeds(scene, layouts, first)
+    ens = run_ensemble(scene, seeds, until=UNTIL, options=Options(dt=dt, force_dt=True))
     return {
+        "seeds": seeds,
         "time": np.asarray(ens.series[0]["time"]),
         "force": np.array([probe_force_magnitude(s) for s in ens.series]),
         "peak": np.array([m["peak_force"] for m in ens.metrics]),
+        "friction_energy": np.array([m["friction_energy"] for m in ens.metrics]),
+        "released": np.array([m["released"] for m in ens.metrics]),
         "status": ens.status,
         "wall_s": time.perf_counter() - start,
     }
@@ -183,7 +192,15 @@ def main(argv=None) -> int:
         type=float,
         help="only the peak force at both steps with this [ice] slide_resolution (5.)",
     )
+    parser.add_argument(
+        "--first-seed",
+        type=int,
+        help="with --rule or --slide-resolution: the layouts' seeds from this one on, "
+        "instead of the paper's layout and seeds 1, 2, ... (written to ..._seedsN.json)",
+    )
     args = parser.parse_args(argv)
+    if args.first_seed is not None and args.rule is None and args.slide_resolution is None:
+        parser.error("--first-seed goes with --rule or --slide-resolution")
     from taichi_ice import backend
 
     backend.init("cpu", "f64")
@@ -297,22 +314,29 @@ def _variant(args, scene, key: str, value, tag: str) -> int:
     """4. and 5.: the peak force at ``args.steps`` of a variant of the scene (``key`` =
     ``value``), written to ``jam_dt_TAG.json``."""
     steps = args.steps
-    runs = {ratio: _curves(scene, args.layouts, ratio) for ratio in steps}
+    tag += "" if args.first_seed is None else f"_seeds{args.first_seed}"
+    runs = {ratio: _curves(scene, args.layouts, ratio, args.first_seed) for ratio in steps}
     peaks = [runs[r]["peak"] for r in steps]
     record = {
         key: value,
         "slide_resolution": scene.ice.slide_resolution,
         "steps": list(steps),
         "layouts": args.layouts,
+        "seeds": runs[steps[0]]["seeds"],
         "until_s": UNTIL,
         "peak_mean_n": [float(p.mean()) for p in peaks],
         "peak_n": [p.tolist() for p in peaks],
+        "friction_energy_j": [runs[r]["friction_energy"].tolist() for r in steps],
+        "released": [runs[r]["released"].tolist() for r in steps],
         "wall_s": [runs[r]["wall_s"] for r in steps],
         "status": [runs[r]["status"] for r in steps],
     }
     print(f"peak force with {key} {value} over {args.layouts} layouts:")
     for r, p in zip(steps, peaks):
-        print(f"  {r:g} stable_dt: {p.mean() / 1e6:.3f} MN ({runs[r]['wall_s']:.0f} s)")
+        print(
+            f"  {r:g} stable_dt: {p.mean() / 1e6:.3f} MN, {int(runs[r]['released'].sum())} "
+            f"released ({runs[r]['wall_s']:.0f} s)"
+        )
     if len(steps) > 1:  # the first against the others
         shifts = [paired_shift(p, peaks[0]) for p in peaks[1:]]
         record["peak_shift_n"] = [s for s, _ in shifts]

@@ -22,7 +22,7 @@ from taichi_ice.codes import BodyKind
 from taichi_ice.errors import ScenarioError
 from taichi_ice.physics import polygon
 from taichi_ice.physics.friction import Coulomb, RateState
-from taichi_ice.physics.timestep import DEFAULT_SAFETY
+from taichi_ice.physics.timestep import DEFAULT_SAFETY, RATE_STATE_SAFETY
 from taichi_ice.scene import parse as sc
 from taichi_ice.scene import tables
 
@@ -430,6 +430,34 @@ def test_auto_dt_and_limit_follow_dynamic_bodies() -> None:
     assert half.dt == pytest.approx(0.1 * scene.stable_dt, rel=1e-15)
 
 
+def test_auto_dt_follows_the_law_unless_the_file_sets_dt_safety() -> None:
+    """dt = "auto" takes 0.2 of the limit with Coulomb friction and 0.05 with a law that has
+    a memory (its pillar statistics are not converged at 0.2 or 0.1: docs/accuracy.md); a
+    file's dt_safety wins for either."""
+    from taichi_ice.physics.friction import Coulomb, MemoryOnly, RateState, SteadyState
+
+    scene = sc.parse_scenario(BASE)
+    limit = scene.stable_dt
+    assert (DEFAULT_SAFETY, RATE_STATE_SAFETY) == (0.2, 0.05)
+    for law, safety in (
+        (Coulomb(mu=0.5), DEFAULT_SAFETY),
+        (RateState(), RATE_STATE_SAFETY),
+        (SteadyState(), RATE_STATE_SAFETY),
+        (MemoryOnly(), RATE_STATE_SAFETY),
+    ):
+        other = scene.with_friction(law)
+        assert other.dt_safety == safety
+        assert other.dt == pytest.approx(safety * limit, rel=1e-15)
+    own = sc.parse_scenario(BASE.replace("duration = 2.0", "duration = 2.0\ndt_safety = 0.3"))
+    for law in (Coulomb(mu=0.5), RateState()):
+        assert own.with_friction(law).dt == pytest.approx(0.3 * limit, rel=1e-15)
+    # The message for a dt above the limit names the step "auto" would take with the law.
+    rs = BASE.replace("duration = 2.0", f"duration = 2.0\ndt = {2 * limit!r}")
+    rs += '\n[friction]\nlaw = "rate-state"\n'
+    with pytest.raises(ScenarioError, match=r'dt = "auto" \(takes 0.05 x the limit'):
+        sc.parse_scenario(rs)
+
+
 # ------------------------------------------------------------------------------------------
 # Defaults and the parsed values
 # ------------------------------------------------------------------------------------------
@@ -445,7 +473,8 @@ def test_defaults() -> None:
         0.1,
         0.01,
     )
-    assert (sim.seed, sim.dt_safety, sim.force_dt) == (0, DEFAULT_SAFETY, False)
+    assert (sim.seed, sim.dt_safety, sim.force_dt) == (0, None, False)
+    assert scene.dt_safety == DEFAULT_SAFETY  # the law's: Coulomb
     assert scene.ice == sc.IceProperties(920.0, 0.3, 9.75e7, 3.16e4, 0.5)
     assert scene.water is None
     assert scene.friction == Coulomb(mu=0.5)

@@ -16,6 +16,7 @@ from taichi_ice.experiments.study import report as study_report
 from taichi_ice.experiments.study import stats as study
 from taichi_ice.experiments.study.design import MODELS, Arm, design
 from taichi_ice.experiments.study.stats import bootstrap_ci, verdict
+from taichi_ice.physics.timestep import default_safety
 
 # Two independent Monte Carlo resamplings of the same data agree on a 95 % quantile to about
 # this fraction of the standard error (4,000 and 20,000 resamples).
@@ -76,7 +77,7 @@ def test_design_gives_each_stratum_its_own_layouts_and_pairs_the_half_step():
         assert len(sweep.worlds()) == 8 * arm.layouts and sweep.until == 1.0
         scene = sweep.scene_for(sweep.worlds()[0])
         assert scene.ice.crushing_strength == arm.strength
-        assert scene.simulation.dt_safety == (arm.dt_safety or study_design.DEFAULT_SAFETY)
+        assert scene.dt_safety == (arm.dt_safety or default_safety(scene.friction.name))
     assert [a.name for a in design(2, 0, 0, 0)] == ["af0.85", "af0.775"]
     with pytest.raises(ValueError, match="not a stratum"):
         study_design.stratum_seeds(0.5, 3)

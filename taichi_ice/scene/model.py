@@ -28,7 +28,7 @@ import numpy as np
 from ..codes import BodyKind
 from ..physics import polygon
 from ..physics.forcing import AIR_DENSITY, AIR_DRAG
-from ..physics.timestep import DEFAULT_SAFETY, stable_time_step
+from ..physics.timestep import default_safety, stable_time_step
 from ..readonly import frozen
 from ..tomlio import dump_toml
 
@@ -79,7 +79,9 @@ class SimulationSettings:
         output_interval: time between frames, s; frames at 0, interval, ..., duration.
         series_interval: time between time-series samples, s.
         seed: seed of the field jitter (``numpy.random.default_rng``).
-        dt_safety: fraction of the stability limit that ``dt = "auto"`` takes, in (0, 1].
+        dt_safety: fraction of the stability limit that ``dt = "auto"`` takes, in (0, 1];
+            ``None`` for the law's (``Scene.dt_safety``: 0.2 with Coulomb friction, 0.05 with
+            a law that has a memory; ``timestep.default_safety``).
         force_dt: accept a ``dt`` above the stability limit (stability studies).
     """
 
@@ -88,7 +90,7 @@ class SimulationSettings:
     output_interval: float = DEFAULT_OUTPUT_INTERVAL
     series_interval: float = DEFAULT_SERIES_INTERVAL
     seed: int = 0
-    dt_safety: float = DEFAULT_SAFETY
+    dt_safety: float | None = None
     force_dt: bool = False
 
 
@@ -444,6 +446,15 @@ class Scene:
             ice.tangential_damping,
         )
 
+    @property
+    def dt_safety(self) -> float:
+        """The fraction of the stability limit ``dt = "auto"`` takes: the file's
+        ``[simulation] dt_safety``, or the law's (``timestep.default_safety``: 0.2 with
+        Coulomb friction, 0.05 with rate and state, whose pillar statistics are not
+        converged at 0.2 or 0.1; docs/accuracy.md)."""
+        sim = self.simulation
+        return sim.dt_safety if sim.dt_safety is not None else default_safety(self.friction.name)
+
     @cached_property
     def dt(self) -> float:
         """The time step, s: the file's, or for ``"auto"`` ``dt_safety * stable_dt``.
@@ -453,7 +464,7 @@ class Scene:
         sim = self.simulation
         if sim.dt is not None:
             return sim.dt
-        return min(sim.dt_safety * self.stable_dt, sim.series_interval, sim.output_interval)
+        return min(self.dt_safety * self.stable_dt, sim.series_interval, sim.output_interval)
 
     def with_friction(self, law: Coulomb | RateState) -> Scene:
         """The same scene with ``law`` at every contact (``text`` regenerated to match)."""

@@ -344,8 +344,8 @@ def _check_time_step(scene: Scene, labels: list[str]) -> None:
         raise ScenarioError(
             f"{scene.source}: [simulation], key 'dt': {sim.dt:g} s is above the stable limit "
             f"{limit:.4g} s of the contact integration (stiffest contact of the lightest "
-            f'dynamic body); use dt = "auto" (takes {sim.dt_safety:g} x the limit, '
-            f"{sim.dt_safety * limit:.3g} s), a dt below the limit, or force_dt = true for a "
+            f'dynamic body); use dt = "auto" (takes {scene.dt_safety:g} x the limit, '
+            f"{scene.dt_safety * limit:.3g} s), a dt below the limit, or force_dt = true for a "
             "stability study"
         )
 

@@ -25,7 +25,6 @@ from ..codes import BodyKind
 from ..errors import ScenarioError
 from ..physics import polygon
 from ..physics.forcing import coriolis_parameter
-from ..physics.timestep import DEFAULT_SAFETY
 from ..readonly import frozen
 from .floes import FILE_KEYS, FileField, parse_file_field
 from .grid import ForcingGrid, read_grid
@@ -148,8 +147,8 @@ def parse_simulation(source: str, data: Any) -> SimulationSettings:
             f"{series_interval:g} s is longer than the duration {duration:g} s; lower it",
         )
     seed = t.integer("seed", 0, minimum=0)
-    dt_safety = t.number("dt_safety", DEFAULT_SAFETY)
-    if not 0.0 < dt_safety <= 1.0:
+    dt_safety = t.number("dt_safety", None)  # None: the law's (Scene.dt_safety)
+    if dt_safety is not None and not 0.0 < dt_safety <= 1.0:
         raise t.error("dt_safety", f"must be in (0, 1], got {dt_safety:g}")
     force_dt = t.boolean("force_dt", False)
     if dt is not None:

@@ -11,8 +11,10 @@ design, and that the three fractions reused one set of seeds (clustered units). 
   (``stratum_seeds``: 0.85 from 0, 0.775 from 100,000, 0.70 from 200,000), so no layout
   is shared between strata; within a stratum the eight models run on the same layouts
   (paired units).
-- **The step's bias**: the first ``step_layouts`` layouts of the 0.85 stratum again at half
-  the default step (``STEP_SAFETY``), every model (the same seeds: paired).
+- **The step's bias**: the first ``step_layouts`` layouts of the 0.85 stratum again at 0.1
+  of the limit (``STEP_SAFETY``), every model (the same seeds: paired): half the default
+  step with Coulomb friction, twice it with the laws that have a memory (their default is
+  0.05 since 2026-11-28; the committed study ran every model at 0.2 and this arm at 0.1).
 - **An ice strength** (``STRENGTHS``, 1 and 3 MPa: ``[ice] crushing_strength``) on the first
   ``strength_layouts`` layouts of each jamming stratum, every model.
 
@@ -49,7 +51,10 @@ STRATA = (0.85, 0.775)
 CONTROL = 0.70
 # Each stratum's seeds start at its index in (0.85, 0.775, 0.70) x SEED_BLOCK.
 SEED_BLOCK = 100_000
-STEP_SAFETY = DEFAULT_SAFETY / 2.0  # half the default step
+# The step arm: every model at 0.1 of the limit, half the Coulomb default (0.2); the laws
+# with a memory default to 0.05 (timestep.RATE_STATE_SAFETY) since 2026-11-28, so for them
+# the arm is twice their default step: the step at which their peak force reads high.
+STEP_SAFETY = DEFAULT_SAFETY / 2.0
 STRENGTHS = (1e6, 3e6)  # Pa: [ice] crushing_strength
 # What each world keeps: every run metric (experiments.metrics.METRICS) but the time of
 # first contact and the budget's absolute residual (its relative one is kept).

@@ -171,7 +171,11 @@ def cluster_scene_dict(
                 "omega": float(rng.uniform(-1.0, 1.0)),
             }
         )
-    scene = {"simulation": {"duration": 1.0}, "friction": {"law": law}, "body": bodies}
+    # dt_safety 0.2 for every law: the step these clusters were written at (their collisions
+    # and list rebuilds within a few hundred steps, the slide's sub-steps taken); "auto"
+    # takes 0.05 with rate and state (test_scenario), where few contacts need sub-steps.
+    simulation = {"duration": 1.0, "dt_safety": 0.2}
+    scene = {"simulation": simulation, "friction": {"law": law}, "body": bodies}
     if water:
         scene["water"] = {}
     return scene

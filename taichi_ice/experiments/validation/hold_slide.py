@@ -85,13 +85,15 @@ def hold_slide(
     Taichi must be running (``backend.init``).
     """
     from ...engine.world import World
+    from .contact_block import CHECK_SAFETY
 
     base = law or RateState()
     params = {k: v for k, v in base.to_dict().items() if k not in ("law", "below_v_star")}
     cases = [(rule, load) for rule in rules for load in loads]
     laws = [RateState(**params, below_v_star=rule) for rule, _ in cases]
     scenes = [block_scene(law_) for law_ in laws]
-    world = World(scenes)
+    # At 0.2 of the limit (``contact_block.CHECK_SAFETY``), the step this check was made at.
+    world = World(scenes, dt=CHECK_SAFETY * min(s.stable_dt for s in scenes))
     dt = world.dt
     mass = float(scenes[0].masses[BLOCK])
     ice = scenes[0].ice

@@ -34,7 +34,10 @@ def jam():
     along it by a kinematic pusher at 2 cm/s against a wall, with rate-and-state friction:
     they jam between the pusher and the wall while sliding on the floor."""
     raw = copy.deepcopy(dict(load_scenario("scenarios/two_squares.toml").raw))
-    raw["simulation"].update(duration=UNTIL, output_interval=0.05, series_interval=0.01)
+    # dt_safety 0.2: the step this jam was written at (rate and state's "auto" is 0.05).
+    raw["simulation"].update(
+        duration=UNTIL, output_interval=0.05, series_interval=0.01, dt_safety=0.2
+    )
     raw["friction"] = {"law": "rate-state"}
     raw["body"] = jam_bodies(push=0.02)
     return scene_from_dict(raw, source="jam")

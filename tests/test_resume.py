@@ -17,6 +17,7 @@ from jam_bodies import jam_bodies
 from taichi_ice import Simulation, load_scenario
 from taichi_ice.commands.cli import main
 from taichi_ice.errors import RunFileError
+from taichi_ice.physics.friction import Coulomb, RateState
 from taichi_ice.physics.slip import NO_INTERFACE
 from taichi_ice.run import checkpoint as ckpt
 from taichi_ice.run.runfile import RunWriter
@@ -146,9 +147,32 @@ def test_ensembles_and_sweeps_tell_a_changed_default_from_the_same_scene():
     assert scene_digest(again) == scene_digest(scene) != scene_digest(resolved)
 
     def sweep_of(s):
-        return _identity(SimpleNamespace(scene=s, until=1.0, window=None), "cpu", "f64")
+        return _identity(
+            SimpleNamespace(scene=s, until=1.0, window=None, laws=(s.friction,)), "cpu", "f64"
+        )
 
     assert sweep_of(again) == sweep_of(scene) != sweep_of(resolved)
+
+    # The same for a step that resolved otherwise: rate and state's dt_safety, 0.2 until
+    # 2026-11-28, 0.05 since (the text leaves it to the law).
+    raw = copy.deepcopy(dict(scene.raw))
+    del raw["simulation"]["dt_safety"]
+    unset = scene_from_dict(raw)
+    old = dataclasses.replace(
+        unset, simulation=dataclasses.replace(unset.simulation, dt_safety=0.2)
+    )
+    assert old.text == unset.text and (old.dt_safety, unset.dt_safety) == (0.2, 0.05)
+    assert scene_digest(old) != scene_digest(unset)
+    assert sweep_of(old) != sweep_of(unset)
+    # A sweep's laws resolve their own steps: a Coulomb scene swept with rate and state.
+    coulomb = unset.with_friction(Coulomb(mu=0.5))
+    laws = {"coulomb": (Coulomb(mu=0.5),), "both": (Coulomb(mu=0.5), RateState())}
+    both = {
+        k: _identity(SimpleNamespace(scene=coulomb, until=1.0, window=None, laws=v), "cpu", "f64")
+        for k, v in laws.items()
+    }
+    assert both["coulomb"]["dt_safety"] == {Coulomb(mu=0.5).label: 0.2}
+    assert both["both"]["dt_safety"] == {Coulomb(mu=0.5).label: 0.2, RateState().label: 0.05}
 
 
 # --------------------------------------------------------------------------------------------

@@ -344,12 +344,15 @@ class Scene:
 
     @cached_property
     def identity(self) -> str:
-        """The scene's text and the ``[ice]`` values it resolved to, defaults included: what a
-        resumed run, ensemble or sweep must share with the one it continues. A default that
-        changed (``slide_resolution``, 0 -> 0.025 on 2026-11-27) makes the same text another
-        run."""
+        """The scene's text and the ``[ice]`` values and ``dt_safety`` it resolved to, defaults
+        included: what a resumed run, ensemble or sweep must share with the one it continues.
+        A default that changed (``slide_resolution``, 0 -> 0.025 on 2026-11-27; rate and
+        state's ``dt_safety``, 0.2 -> 0.05 on 2026-11-28) makes the same text another run."""
         ice = json.dumps(dataclasses.asdict(self.ice), sort_keys=True)
-        return f"{self.text}\n# [ice] as resolved: {ice}\n"
+        return (
+            f"{self.text}\n# [ice] as resolved: {ice}\n"
+            f"# [simulation] dt_safety as resolved: {self.dt_safety!r}\n"
+        )
 
     @cached_property
     def names(self) -> tuple[str, ...]:

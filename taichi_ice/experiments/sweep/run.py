@@ -158,6 +158,9 @@ def _identity(sweep: Sweep, arch: str, precision: str) -> dict:
         # the text and the [ice] it resolved to (Scene.identity): a changed default is
         # another sweep
         "scene_sha1": hashlib.sha1(sweep.scene.identity.encode()).hexdigest(),
+        # each law's step as "auto" resolves it (rate and state's default moved 0.2 -> 0.05
+        # on 2026-11-28): worlds of another step are another sweep
+        "dt_safety": {law.label: sweep.scene.with_friction(law).dt_safety for law in sweep.laws},
         "until": sweep.until,
         "window": sweep.window,
         "arch": arch,

@@ -580,7 +580,8 @@ def test_rate_state_contact_slides_at_steady_state_friction(run_opts):
         # rides along, hits the stop, and from then slides at V on the floor.
         return scene_from_dict(
             {
-                "simulation": {"duration": 0.4, "series_interval": 0.001},
+                # dt_safety 0.2: the step this was written at (rate and state's "auto" is 0.05)
+                "simulation": {"duration": 0.4, "series_interval": 0.001, "dt_safety": 0.2},
                 "friction": law.to_dict(),
                 "body": [
                     {

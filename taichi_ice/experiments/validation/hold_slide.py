@@ -84,8 +84,7 @@ def hold_slide(
     Returns the JSON-ready summary: ``{"setup": ..., "cases": {rule: {load: {...}}}}``.
     Taichi must be running (``backend.init``).
     """
-    from ...engine.world import World
-    from .contact_block import CHECK_SAFETY
+    from .contact_block import make_world
 
     base = law or RateState()
     params = {k: v for k, v in base.to_dict().items() if k not in ("law", "below_v_star")}
@@ -93,7 +92,7 @@ def hold_slide(
     laws = [RateState(**params, below_v_star=rule) for rule, _ in cases]
     scenes = [block_scene(law_) for law_ in laws]
     # At 0.2 of the limit (``contact_block.CHECK_SAFETY``), the step this check was made at.
-    world = World(scenes, dt=CHECK_SAFETY * min(s.stable_dt for s in scenes))
+    world = make_world(scenes)
     dt = world.dt
     mass = float(scenes[0].masses[BLOCK])
     ice = scenes[0].ice

@@ -266,8 +266,16 @@ def test_world_matches_numpy_reference_step(f64, law, water, integrator):
         for s in range(counts[i])
     }
     assert set(kernel_xi) == set(state.contacts)
-    for key, xi in kernel_xi.items():
-        assert xi == pytest.approx(state.contacts[key].xi, rel=REFERENCE_RTOL, abs=1e-15)
+    # Judged against the stretches' scale, as the positions are against theirs: a stretch is
+    # a difference of the bodies' motions, so a small one carries their round-off, not its
+    # own (lavapipe's fused multiply-adds on an AMD EPYC: 1.9e-9 of a 1.1e-5 m stretch, 2e-14 m).
+    keys = sorted(kernel_xi)
+    got = np.array([kernel_xi[key] for key in keys])
+    want = np.array([state.contacts[key].xi for key in keys])
+    xi_scale = float(np.max(np.abs(want), initial=0.0))
+    xi_err = float(np.max(np.abs(got - want), initial=0.0))
+    print(f"{len(keys)} stretches, largest {xi_scale:.3e} m, largest difference {xi_err:.2e} m")
+    assert xi_err <= REFERENCE_RTOL * xi_scale + 1e-15
 
 
 # --------------------------------------------------------------------------------------------

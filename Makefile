@@ -41,7 +41,8 @@ vulkan-device: $(STAMP)
 
 # The GPU code paths on Vulkan (a kernel per stage; a thread per world), float64 and
 # float32: the physics tests that cover every kernel, and the same worlds against the CPU
-# (tests/test_gpu.py). The list is tests/gpu_lane.py's.
+# (tests/test_gpu.py), a pytest worker per core; the tests marked long_run are left to the
+# CPU suite (tests/gpu_lane.py --run vulkan --full runs them too). The list is tests/gpu_lane.py's.
 test-vulkan: $(STAMP)
 	$(BIN)/python tests/gpu_lane.py --run vulkan
 

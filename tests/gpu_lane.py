@@ -2,12 +2,20 @@
 
     python tests/gpu_lane.py --check          # exit 0 if a Vulkan device answers, else 1
     python tests/gpu_lane.py --run vulkan     # the lane on Vulkan (make test-vulkan)
-    python tests/gpu_lane.py --run cuda       # the same on CUDA, where there is one
+    python tests/gpu_lane.py --run vulkan --full   # and the long runs (below)
+    python tests/gpu_lane.py --run cuda       # the same on CUDA, where there is one (all of it)
 
-Each precision runs in its own pytest process (Taichi holds one runtime per process) with
+Each precision runs in its own pytest session (Taichi holds one runtime per process) with
 ``--arch`` and ``--precision`` (tests/conftest.py), and a line gives its pass count and time.
 On Vulkan without a GPU (Mesa's lavapipe) the kernels run on the CPU through SPIR-V, slowly
-but by the GPU code paths: a kernel per stage and step, and a thread per world.
+but by the GPU code paths: a kernel per stage and step, and a thread per world. There a
+session takes a pytest worker per core (at most 4: ``--workers``), and leaves out the tests
+marked ``long_run`` unless ``--full``: the pillar's 20 s budgets and the convergence studies,
+whose kernels the lane covers otherwise (measured on lavapipe, float64, 2 workers on 2
+cores: 1982 of the lane's 3985 test-seconds; CI ran the whole float64 lane in 67 min on one
+worker). What the GPU answer of such a test rests on: ``test_gpu.py`` holds the same scenes
+and integrators equal to the CPU's to round-off, the kernels' twins hold on the lane, and the
+CPU suite runs the long tests whole.
 
 What the lane holds and why (the CPU suite runs all of it too):
 
@@ -30,6 +38,7 @@ What the lane holds and why (the CPU suite runs all of it too):
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
@@ -93,9 +102,25 @@ def describe(arch: str) -> str:
     return said[-1] if proc.returncode == 0 and said else f"unknown (exit {proc.returncode})"
 
 
-def run_lane(arch: str, extra: list[str]) -> int:
+def lane_options(arch: str, full: bool, workers: int | None) -> list[str]:
+    """pytest's options for the lane on ``arch``: on Vulkan (software, CPU-bound) a worker
+    per core and no long runs unless ``full``; on CUDA one process and everything."""
+    if arch != "vulkan":
+        return []
+    if workers is None:
+        workers = max(1, min(os.cpu_count() or 1, 4))
+    options = [] if full else ["-m", "not long_run"]
+    if workers > 1:
+        options += ["-n", str(workers), "--dist", "load"]
+    return options
+
+
+def run_lane(arch: str, extra: list[str], full: bool = False, workers: int | None = None) -> int:
     failed = 0
+    options = lane_options(arch, full, workers)
     print(f"{arch} lane: forces gathered by {describe(arch)}", flush=True)
+    if "not long_run" in options:
+        print(f"{arch} lane: long runs left to the CPU suite (--full runs them here)", flush=True)
     for precision, files in LANE.items():
         start = time.perf_counter()
         cmd = [
@@ -109,6 +134,7 @@ def run_lane(arch: str, extra: list[str]) -> int:
             arch,
             "--precision",
             precision,
+            *options,
             *files,
             *extra,
         ]
@@ -129,14 +155,20 @@ def main(argv=None) -> int:
     group = ap.add_mutually_exclusive_group(required=True)
     group.add_argument("--check", action="store_true", help="exit 0 if Vulkan answers")
     group.add_argument("--run", metavar="ARCH", help="run the lane on ARCH (vulkan, cuda)")
+    ap.add_argument("--full", action="store_true", help="on Vulkan, the long runs too")
+    ap.add_argument(
+        "--workers", type=int, default=None, help="on Vulkan, pytest workers (default: cores, <= 4)"
+    )
     args, extra = ap.parse_known_args(argv)
+    if args.workers is not None and args.workers < 1:
+        ap.error(f"--workers {args.workers}: give 1 or more")
     sys.path.insert(0, str(ROOT))
     if args.check:
         return 0 if device_answers("vulkan") else 1
     if not device_answers(args.run):
         print(f"{args.run} lane: Taichi finds no {args.run} device here", file=sys.stderr)
         return 1
-    return run_lane(args.run, extra)
+    return run_lane(args.run, extra, full=args.full, workers=args.workers)
 
 
 if __name__ == "__main__":

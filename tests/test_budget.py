@@ -100,6 +100,7 @@ def test_free_field_budget_closes_for_every_law_and_shrinks_with_dt(f64):
         assert created < CREATED_RTOL * came[k], name
 
 
+@pytest.mark.long_run
 def test_pillar_budget_closes_for_every_law(f64):
     """The paper's scene, its 20 s (the jams form after ~10 s: ~1 MJ of work in), under every
     law (the laws with memory slide in sub-steps; rate and state in one step too): residual
@@ -112,6 +113,7 @@ def test_pillar_budget_closes_for_every_law(f64):
         assert np.max(np.abs(res[:, k])) < RESIDUAL_RTOL * work[k], name
 
 
+@pytest.mark.long_run
 @pytest.mark.parametrize("strength", [1e6, 3e6], ids=["1MPa", "3MPa"])
 def test_crushing_budget_closes(f64, strength):
     """With an ice strength the crushed overlap's work is booked when it crushes and what a

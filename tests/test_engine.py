@@ -415,6 +415,7 @@ def test_analytic_offset_collision_converges_at_second_order(f64, run_opts):
         assert errors["analytic", ratio] < errors["euler", ratio]
 
 
+@pytest.mark.long_run
 def test_coupled_offset_collision_meets_issue_30s_target(f64, run_opts):
     """Issue 30's target for a collision at four times the default step (0.8 stable_dt):
     restitution and duration within 1.5 % of the ODE of the same contact law
@@ -458,6 +459,7 @@ def test_coupled_offset_collision_meets_issue_30s_target(f64, run_opts):
         assert errors["analytic", 0.8, law][0] > 5.0 * errors["coupled", 0.8, law][0]
 
 
+@pytest.mark.long_run
 def test_midstep_collision_is_second_order_where_it_is_smooth(f64, run_opts):
     """Without friction the offset collision is smooth, and the engine's midstep step (each
     contact linearised at mid-step) converges at order >= 1.9 in restitution, duration and
@@ -697,6 +699,7 @@ def pushed_field(duration=1.0):
     return scene_from_dict(raw)
 
 
+@pytest.mark.long_run
 @pytest.mark.parametrize("integrator", ["euler", "analytic", "coupled", "midstep"])
 def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision, integrator):
     """Work in = kinetic + elastic + friction + viscous + drag + severed, up to O(dt) with

@@ -29,7 +29,7 @@ validate: $(STAMP)
 
 # The CPU suite (a worker per core: tests/conftest.py); then one line on the Vulkan lane (`make test-vulkan`), which needs a Vulkan
 # device (lavapipe, Mesa's software driver, counts: `apt-get install mesa-vulkan-drivers`).
-# The lane takes ~20 min on 2 cores, beyond make test's 15: .ci/run runs both.
+# The lane took 27 min on the 2-core VM on 2026-11-28 (docs/performance.md): .ci/run runs both.
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(JOBS) --dist loadfile
 	@if $(BIN)/python tests/gpu_lane.py --check; then echo "Vulkan device found: make test-vulkan runs the GPU lane (CI runs it)"; \

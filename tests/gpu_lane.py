@@ -107,8 +107,9 @@ def lane_options(arch: str, full: bool, workers: int | None) -> list[str]:
     per core and no long runs unless ``full``; on CUDA one process and everything."""
     if arch != "vulkan":
         return []
-    if workers is None:
-        workers = max(1, min(os.cpu_count() or 1, 4))
+    if workers is None:  # the cores this process may run on, as make test's nproc counts them
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        workers = max(1, min(cores or 1, 4))
     options = [] if full else ["-m", "not long_run"]
     if workers > 1:
         options += ["-n", str(workers), "--dist", "load"]

@@ -11,11 +11,10 @@ On Vulkan without a GPU (Mesa's lavapipe) the kernels run on the CPU through SPI
 but by the GPU code paths: a kernel per stage and step, and a thread per world. There a
 session takes a pytest worker per core (at most 4: ``--workers``), and leaves out the tests
 marked ``long_run`` unless ``--full``: the pillar's 20 s budgets and the convergence studies,
-whose kernels the lane covers otherwise (measured on lavapipe, float64, 2 workers on 2
-cores: 1982 of the lane's 3985 test-seconds; CI ran the whole float64 lane in 67 min on one
-worker). What the GPU answer of such a test rests on: ``test_gpu.py`` holds the same scenes
-and integrators equal to the CPU's to round-off, the kernels' twins hold on the lane, and the
-CPU suite runs the long tests whole.
+half the float64 lane's time there (docs/performance.md has the measurements). What the GPU
+answer of such a test rests on: ``test_gpu.py`` holds the same scenes and integrators equal
+to the CPU's to round-off, the kernels' twins hold on the lane, and the CPU suite runs the
+long tests whole.
 
 What the lane holds and why (the CPU suite runs all of it too):
 
@@ -120,7 +119,7 @@ def run_lane(arch: str, extra: list[str], full: bool = False, workers: int | Non
     failed = 0
     options = lane_options(arch, full, workers)
     print(f"{arch} lane: forces gathered by {describe(arch)}", flush=True)
-    if "not long_run" in options:
+    if arch == "vulkan" and not full:
         print(f"{arch} lane: long runs left to the CPU suite (--full runs them here)", flush=True)
     for precision, files in LANE.items():
         start = time.perf_counter()

@@ -407,6 +407,7 @@ def test_analytic_offset_collision_converges_at_second_order(f64, run_opts):
             sim.run(until=end)
             v = sim.velocities(0)
             errors[integrator, ratio] = abs((v[1, 0] - v[0, 0]) / want - 1.0)
+            del sim  # its World (kernels compiled) serves the next Simulation
     print({k: f"{e:.2e}" for k, e in errors.items()})
     order = math.log2(errors["analytic", 0.4] / errors["analytic", 0.2])
     assert order >= 1.9
@@ -451,6 +452,7 @@ def test_coupled_offset_collision_meets_issue_30s_target(f64, run_opts):
                     abs(e / refs[w][0] - 1.0),
                     abs(apart / refs[w][1] - 1.0),
                 )
+            del sim  # its World (kernels compiled) serves the next Simulation
     print({k: f"{r:.1e} / {d:.1e}" for k, (r, d) in errors.items()})
     for law in laws:
         for ratio in (0.8, 1.6):
@@ -496,6 +498,7 @@ def test_midstep_collision_is_second_order_where_it_is_smooth(f64, run_opts):
                 )
                 got = (v[1, 0] - v[0, 0], apart, sim.omegas(w)[0])
                 errors[integrator, ratio, w] = [abs(g / r - 1.0) for g, r in zip(got, refs[w])]
+            del sim  # its World (kernels compiled) serves the next Simulation
 
     def order(integrator, k):  # least-squares slope over 0.1, 0.2 and 0.4 stable_dt
         e = [errors[integrator, r, 0][k] for r in (0.1, 0.2, 0.4)]
@@ -727,6 +730,7 @@ def test_pushed_field_energy_budget_closes_and_converges(run_opts, precision, in
         )
         assert work > 100.0  # the pusher did compact the rubble
         assert worst[-1] < BUDGET_RTOL
+        del sim  # its World (kernels compiled) serves the next Simulation
     if precision == "f64":  # float32 round-off of the energy sums hides the O(dt) term
         if integrator == "euler":
             assert worst[1] < FIRST_ORDER_RATIO * worst[0]
@@ -769,9 +773,13 @@ def test_rotated_translated_scene_gives_rotated_trajectories(f64, run_opts):
     np.testing.assert_allclose(sim.omegas(1), sim.omegas(0), rtol=0, atol=SYMMETRY_ATOL)
 
 
+# What a World's bodies and contacts are: the readers two runs are compared by.
+MOTION = ("positions", "velocities", "angles", "omegas", "contact_counts")
+
+
 def assert_same_motion(a: World, b: World) -> None:
     """Two Worlds of the same scenes hold the same bodies and contacts, bit for bit."""
-    for get in ("positions", "velocities", "angles", "omegas", "contact_counts"):
+    for get in MOTION:
         np.testing.assert_array_equal(getattr(a, get)(), getattr(b, get)(), err_msg=get)
 
 
@@ -812,6 +820,7 @@ def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping, integr
         np.testing.assert_array_equal(alone.omegas(), batch.omegas()[sl])
         # Energy terms are summed in float in candidate order: ascending ids, in any batch.
         np.testing.assert_array_equal(alone.energies()[0], batch.energies()[w])
+        del alone  # its fields and kernels serve the next World of its layout
 
 
 def with_ice(scene, **ice):
@@ -841,6 +850,7 @@ def test_a_world_with_its_slide_in_sub_steps_is_the_same_alone_and_in_a_batch(f6
         np.testing.assert_array_equal(alone.positions(), batch.positions()[sl])
         np.testing.assert_array_equal(alone.velocities(), batch.velocities()[sl])
         np.testing.assert_array_equal(alone.energies()[0], batch.energies()[w])
+        del alone  # its fields and kernels serve the next World of its layout
     assert batch.energies()[0][EnergyTerm.FRICTION] > 0  # it slid
     one_step = World([with_ice(plain[0], slide_resolution=0.0)], dt=dt, stepping=stepping)
     one_step.advance(400)
@@ -864,20 +874,22 @@ def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
     )
     dt = min(soft.stable_dt, stiff.stable_dt) / 40
     batch = World([soft, stiff], dt=dt, stepping=stepping)
-    alone = [World([s], dt=dt, stepping=stepping) for s in (soft, stiff)]
-    # The batch's counts are within the lone world's capacities (8 bodies, 4 probes): the
-    # same layout but for the number of worlds.
-    assert alone[0].layout.replace(n_worlds=2) == batch.layout
     assert (batch.batch.n_bodies, batch.batch.n_probes) == (4, 2)
     steps = round(0.02 / dt)
-    for world in (batch, *alone):
-        world.advance(steps)
-        world.check()
-    for w, one in enumerate(alone):
+    batch.advance(steps)
+    batch.check()
+    for w, scene in enumerate((soft, stiff)):
+        one = World([scene], dt=dt, stepping=stepping)
+        # The batch's counts are within the lone world's capacities (8 bodies, 4 probes):
+        # the same layout but for the number of worlds.
+        assert one.layout.replace(n_worlds=2) == batch.layout
+        one.advance(steps)
+        one.check()
         sl = batch.world_slices()[w]
         np.testing.assert_array_equal(one.positions(), batch.positions()[sl])
         np.testing.assert_array_equal(one.velocities(), batch.velocities()[sl])
         np.testing.assert_array_equal(one.energies()[0], batch.energies()[w])
+        del one  # its fields and kernels serve the next World of its layout
     m_eff = float(soft.masses[0]) / 2.0
     for w, scene in enumerate((soft, stiff)):
         _, restitution = clamped_oscillator(
@@ -909,34 +921,38 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law, inte
     integrator (the analytic one gathers its position impulses in fixed point too)."""
     scenes = [scene_from_dict(cluster_scene_dict(seed, 3 + seed, law=law)) for seed in range(3)]
     dt = min(s.dt for s in scenes)
-    by_bodies = World(scenes, dt=dt, stepping="bodies", integrator=integrator)
-    by_worlds = World(scenes, dt=dt, stepping="worlds", integrator=integrator)
-    # The parallel step as a GPU runs it: its two kernels launched every step (on the CPU
-    # a team of threads takes many steps per launch, ``stepper.BodyTeam``).
-    by_kernels = World(scenes, dt=dt, stepping="bodies", integrator=integrator)
-    if backend.actual_arch() == "cpu":  # the team is the CPU's; a GPU launches kernels
-        assert by_bodies.team is not None
-    by_kernels.team = None
-    start = by_worlds.positions()
-    contacts = 0
-    for _ in range(8):
-        by_bodies.advance(50)
-        by_worlds.advance(50)
-        by_kernels.advance(50)
-        contacts += int(by_worlds.contact_counts().sum())
-    for world in (by_bodies, by_worlds, by_kernels):
+
+    def stepped(stepping: str, kernels: bool = False) -> tuple[dict, int, float]:
+        """The three ways run one after the other, each World gone before the next is built
+        (the two ways by bodies share a layout: the second takes the first's kernels)."""
+        world = World(scenes, dt=dt, stepping=stepping, integrator=integrator)
+        if stepping == "bodies" and backend.actual_arch() == "cpu":
+            assert world.team is not None  # the team is the CPU's; a GPU launches kernels
+        if kernels:
+            # The parallel step as a GPU runs it: its two kernels launched every step (on the
+            # CPU a team of threads takes many steps per launch, ``stepper.BodyTeam``).
+            world.team = None
+        start = world.positions()
+        contacts = 0
+        for _ in range(8):
+            world.advance(50)
+            contacts += int(world.contact_counts().sum())
         world.check()
+        n = world.batch.n_bodies
+        ref = world.neighbours.nbr_ref_pos.to_numpy()[:n]
+        got = {name: getattr(world, name)() for name in (*MOTION, "energies")}
+        got["nbr_ref_pos"] = ref
+        moved = float(np.max(np.hypot(*(ref - start).T)))
+        return got, contacts, moved / float(world.host.list_skin)
+
+    by_worlds, contacts, moved = stepped("worlds")
     # The lists were rebuilt after some block had moved half the skin (they record where),
     # at the same steps in every way of stepping: a team's launch stopped there.
-    n = by_worlds.batch.n_bodies
-    ref = by_worlds.neighbours.nbr_ref_pos.to_numpy()[:n]
-    moved = np.max(np.hypot(*(ref - start).T))
-    assert moved > 0.5 * float(by_worlds.host.list_skin)
+    assert moved > 0.5
     assert contacts > 0
-    for other in (by_bodies, by_kernels):
-        np.testing.assert_array_equal(other.neighbours.nbr_ref_pos.to_numpy()[:n], ref)
-        assert_same_motion(other, by_worlds)
-        np.testing.assert_array_equal(other.energies(), by_worlds.energies())
+    for other in (stepped("bodies")[0], stepped("bodies", kernels=True)[0]):
+        for name, values in by_worlds.items():
+            np.testing.assert_array_equal(other[name], values, err_msg=name)
 
 
 @pytest.mark.parametrize("stepping", ["worlds", "bodies"])
@@ -953,14 +969,12 @@ def test_skipping_pairs_a_gap_keeps_apart_changes_nothing(f64, stepping):
         with pytest.raises(BackendError, match="65,535"):
             World([scene], stepping=stepping).advance(1)
         return
+    # One World after the other, the first gone before the second takes its kernels.
     skipping = World([scene], stepping=stepping)
-    testing = World([scene], stepping=stepping)
     n = skipping.batch.n_bodies
     skippable = listed = 0
     for step in range(300):
         skipping.advance(1)
-        testing.neighbours.nbr_gap.fill(-1.0)
-        testing.advance(1)
         if step % 30 == 29:
             count = skipping.neighbours.nbr_count.to_numpy()[:n]
             ids = skipping.neighbours.nbr_ids.to_numpy()[:n]
@@ -971,11 +985,17 @@ def test_skipping_pairs_a_gap_keeps_apart_changes_nothing(f64, stepping):
                     listed += 1
                     skippable += path[i] + path[ids[i, k]] < gaps[i, k]
     skipping.check()
-    testing.check()
     assert int(skipping.contact_counts()[0]) > 10
     assert skippable > 0.5 * listed, (skippable, listed)
-    assert_same_motion(skipping, testing)
-    np.testing.assert_array_equal(skipping.energies(), testing.energies())
+    skipped = {name: getattr(skipping, name)() for name in (*MOTION, "energies")}
+    del skipping
+    testing = World([scene], stepping=stepping)
+    for _ in range(300):
+        testing.neighbours.nbr_gap.fill(-1.0)
+        testing.advance(1)
+    testing.check()
+    for name, values in skipped.items():
+        np.testing.assert_array_equal(getattr(testing, name)(), values, err_msg=name)
 
 
 def test_a_world_past_taichis_field_trees_is_refused_with_a_clear_error(monkeypatch):

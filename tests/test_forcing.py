@@ -351,6 +351,7 @@ def test_forcing_runs_alike_alone_in_a_batch_and_stepped_by_bodies(f64):
         np.testing.assert_array_equal(alone.positions()[0], batch.positions()[k])
         np.testing.assert_array_equal(alone.velocities()[0], batch.velocities()[k])
         np.testing.assert_array_equal(alone.energies()[0], batch.energies()[k])
+        del alone  # its fields and kernels serve the next World of its layout
 
 
 # --------------------------------------------------------------------------------------------

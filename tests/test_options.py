@@ -254,3 +254,59 @@ def test_worlds_of_an_earlier_taichi_start_are_dropped(pool, monkeypatch):
     monkeypatch.setattr(backend, "generation", lambda: -1)
     Simulation(scene)
     assert len(pool) == 1 and (pool.built, pool.reloaded) == (2, 0)
+
+
+def test_a_world_built_after_a_simulation_takes_the_kernels_of_its_idle_world(pool):
+    """A Simulation gone leaves its World idle in the pool, for the next Simulation; a World
+    built directly for the same layout (as the tests and the validation studies build
+    theirs) takes that World's fields and compiled stages (``Engines.take`` asks the pool to
+    let go of it, ``WorldPool.release``) instead of compiling its own, and steps, field for
+    field, as a World on new fields."""
+    from taichi_ice.engine import world as world_module
+    from taichi_ice.engine.world import World
+    from taichi_ice.run.simulation import Simulation
+
+    scene = load_scenario("two_squares")
+    sim = Simulation(scene)
+    sim.run(until=0.3)  # past the collision: the fields hold a contact's leftovers
+    options, key, data = sim.world.options, sim.world.engine_key, sim.world.data
+    del sim
+    assert pool.idle() == 1
+    engines = world_module.ENGINES
+    built, reused = engines.built, engines.reused
+    again = World([scene], options)
+    assert again.engine_key == key and again.data is data
+    assert (engines.built, engines.reused, len(pool)) == (built, reused + 1, 0)
+    new = World([scene], options)  # `again` holds those fields: new ones
+    assert new.data is not data and engines.built == built + 1
+    for world in (again, new):
+        world.advance(3000)
+        world.check()
+    got, expected = _fields(again), _fields(new)
+    for name in expected:
+        assert np.array_equal(got[name], expected[name]), name
+
+
+def test_a_world_gone_in_a_reference_cycle_still_gives_its_kernels_to_the_next(monkeypatch):
+    """A World that is unreachable but in a reference cycle is freed only by Python's
+    collector; ``Engines.take`` runs it before building, so the next World of the layout
+    takes the cycle's fields even with automatic collection off."""
+    import gc
+
+    from taichi_ice.engine import world as world_module
+    from taichi_ice.engine.world import World
+
+    engines = world_module.Engines()
+    monkeypatch.setattr(world_module, "ENGINES", engines)
+    scene = load_scenario("two_squares")
+    gc.disable()
+    try:
+        first = World([scene], stepping="worlds")
+        first.me = first  # a cycle: only the collector frees it
+        data = first.data
+        del first
+        assert engines.idle() == 0  # not freed yet
+        again = World([scene], stepping="worlds")
+    finally:
+        gc.enable()
+    assert again.data is data and (engines.built, engines.reused) == (1, 1)

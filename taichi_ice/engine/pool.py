@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from .options import Options
+from .world import ENGINES
 
 __all__ = ["POOL", "WorldPool"]
 
@@ -169,6 +170,17 @@ class WorldPool:
         self.built += 1
         return entry
 
+    def release(self, key: tuple) -> bool:
+        """Let go of one idle World whose kernels are ``key`` (``World.engine_key``), so that
+        its fields and kernels pass to a World being built outside the pool
+        (``world.Engines``) instead of it compiling its own; False if there is none."""
+        with self._lock:
+            for e in self._entries:
+                if getattr(e.world, "engine_key", None) == key and e.free():
+                    self._entries.remove(e)
+                    return True
+        return False
+
     def put(self, world, asked: Options | None = None) -> None:
         """Give back a World that ``get`` or ``lease`` handed out: the next batch may take
         it (``asked``: the options it was built for, kept for the record)."""
@@ -202,3 +214,12 @@ class WorldPool:
 
 # This process's Worlds: a Dask worker keeps them from one batch to the next.
 POOL = WorldPool()
+
+
+def _release_idle(key: tuple) -> bool:
+    """``world.Engines``'s ask before it builds a World anew: the process's pool (as it is
+    now: tests put a pool of their own in its place) lets go of an idle World of ``key``."""
+    return POOL.release(key)
+
+
+ENGINES.holders.append(_release_idle)

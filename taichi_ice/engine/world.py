@@ -25,6 +25,7 @@ contact and integration code body by body. All three give bit-identical states.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import threading
 import weakref
 from collections.abc import Sequence
@@ -160,6 +161,7 @@ class World:
         if stepping == "bodies" and backend.actual_arch() in (None, "cpu"):
             threads = min(backend.cpu_threads(), backend.usable_cores())
         key = (self.layout, stepping, threads, backend.generation())
+        self.engine_key = key
         parts = ENGINES.take(key)
         reused = parts is not None
         if parts is None:
@@ -505,6 +507,8 @@ class Engines:
 
     Attributes:
         built, reused: Worlds built on new fields, and on fields of a World gone, so far.
+        holders: callables ``release(key) -> bool`` of what keeps idle Worlds, asked to let
+            go of one of ``key`` before a World is built anew (``engine.pool`` adds its own).
     """
 
     def __init__(self):
@@ -512,19 +516,37 @@ class Engines:
         self._lock = threading.Lock()
         self.built = 0
         self.reused = 0
+        self.holders: list = []
 
     def take(self, key: tuple) -> dict | None:
         """The parts of a World gone for ``key`` (layout, stepping, team, generation), or
-        None (the caller builds them: counted as built)."""
+        None (the caller builds them: counted as built).
+
+        Before answering None (and the caller compiling a set anew: seconds), it asks
+        whoever keeps idle Worlds (``holders``: the process's pool, ``pool.WorldPool.release``,
+        where a ``Simulation`` gone leaves its World) to let go of one of ``key``, and runs
+        Python's collector, since a World gone in a reference cycle gives its parts back
+        only then."""
+        parts = self._pop(key)
+        if parts is None:
+            for release in list(self.holders):
+                if release(key):
+                    break
+            gc.collect()  # outside the lock: the finalizers it runs call give_back
+            parts = self._pop(key)
+        with self._lock:
+            if parts is None:
+                self.built += 1
+            else:
+                self.reused += 1
+        return parts
+
+    def _pop(self, key: tuple) -> dict | None:
         with self._lock:
             generation = key[-1]
             self._idle = {k: v for k, v in self._idle.items() if k[-1] == generation and v}
             idle = self._idle.get(key)
-            if idle:
-                self.reused += 1
-                return idle.pop()
-            self.built += 1
-            return None
+            return idle.pop() if idle else None
 
     def give_back(self, key: tuple, parts: dict) -> None:
         """``parts`` of a World gone, for the next World of ``key``."""

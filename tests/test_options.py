@@ -52,6 +52,18 @@ def _fields(world) -> dict:
     return {name: getattr(h, name).to_numpy() for h in holders for name in h.names}
 
 
+def _step_alike(reused, new, steps: int) -> dict:
+    """Step a World on reused fields and one on new fields alike; they end field for field
+    the same (the reused one's fields are returned)."""
+    for world in (reused, new):
+        world.advance(steps)
+        world.check()
+    got, expected = _fields(reused), _fields(new)
+    for name in expected:
+        assert np.array_equal(got[name], expected[name]), name
+    return got
+
+
 def test_a_world_reloaded_at_another_dt_steps_as_one_built_for_it():
     """The layout a World compiles for holds no dt (the runaway bound is a distance per step,
     compared with |v| dt at run time): the same scenes assembled at dt and dt / 3 give equal
@@ -197,12 +209,7 @@ def test_a_world_on_the_fields_of_one_gone_steps_as_one_on_new_fields(monkeypatc
     assert again.data is data and (engines.built, engines.reused) == (1, 1)
     new = World([block], stepping="worlds")  # `again` holds the idle fields: new ones
     assert new.data is not data and engines.built == 2
-    for world in (again, new):
-        world.advance(3000)
-        world.check()
-    got, expected = _fields(again), _fields(new)
-    for name in expected:
-        assert np.array_equal(got[name], expected[name]), name
+    got = _step_alike(again, new, 3000)
     theta = got["contact_theta"][got["contact_partner"] >= 0]
     assert theta.size and np.all(theta != 0.0)  # rate-and-state memory was compared
 
@@ -279,12 +286,7 @@ def test_a_world_built_after_a_simulation_takes_the_kernels_of_its_idle_world(po
     assert (engines.built, engines.reused, len(pool)) == (built, reused + 1, 0)
     new = World([scene], options)  # `again` holds those fields: new ones
     assert new.data is not data and engines.built == built + 1
-    for world in (again, new):
-        world.advance(3000)
-        world.check()
-    got, expected = _fields(again), _fields(new)
-    for name in expected:
-        assert np.array_equal(got[name], expected[name]), name
+    _step_alike(again, new, 3000)
 
 
 def test_a_world_gone_in_a_reference_cycle_still_gives_its_kernels_to_the_next(monkeypatch):

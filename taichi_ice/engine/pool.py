@@ -176,7 +176,7 @@ class WorldPool:
         (``world.Engines``) instead of it compiling its own; False if there is none."""
         with self._lock:
             for e in self._entries:
-                if getattr(e.world, "engine_key", None) == key and e.free():
+                if e.world.engine_key == key and e.free():
                     self._entries.remove(e)
                     return True
         return False

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import signal
 import subprocess
@@ -18,6 +19,7 @@ import shapely
 from taichi_ice.commands.cli import main
 from taichi_ice.experiments.sweep.run import run_sweep
 from taichi_ice.experiments.sweep.spec import SweepError, apply_overrides, load_sweep
+from taichi_ice.physics.friction import Coulomb, RateState
 from taichi_ice.scene.parse import load_scenario
 
 PILLAR = "scenarios/pillar.toml"
@@ -426,3 +428,65 @@ def test_a_short_batch_is_padded_only_to_the_capacity_of_the_largest(sweep_dir):
     last, pad = by7[1].worlds[-1], by7[1].pad
     assert 0 < pad < 6
     assert layout(last, 1 + pad) == layout(last, 7) != layout(last, pad)
+
+
+MIXED = """
+[sweep]
+scene = "small.toml"
+seeds = { start = 0, count = 4 }
+until = 0.4
+
+[[law]]
+law = "coulomb"
+mu = 0.9
+
+[[law]]
+law = "rate-state"
+"""
+
+
+def test_each_model_is_split_over_the_workers_and_the_longest_batches_go_first(tmp_path):
+    """With two workers each model's worlds are cut in two batches, and the batches come
+    longest first: rate and state's, at a quarter of Coulomb's step (``dt_safety``), before
+    Coulomb's, so no worker is left running a long batch alone at the end."""
+    from taichi_ice.experiments.sweep.plan import batch_seconds, plan_batches
+
+    (tmp_path / "small.toml").write_text(SMALL)
+    (tmp_path / "sweep.toml").write_text(MIXED)
+    sweep = load_sweep(tmp_path / "sweep.toml")
+    base = sweep.scene
+    coulomb_dt, memory_dt = (base.with_friction(law).dt for law in (Coulomb(0.9), RateState()))
+    assert memory_dt < coulomb_dt  # the premise: a law with memory steps smaller
+    batches = plan_batches(sweep, sweep.worlds(), workers=2)
+    laws = [b.worlds[0].law["law"] for b in batches]
+    assert laws == ["rate-state", "rate-state", "coulomb", "coulomb"]
+    assert [len(b.worlds) for b in batches] == [2, 2, 2, 2]
+    seconds = [batch_seconds(sweep, b) for b in batches]
+    assert seconds[0] / seconds[-1] == pytest.approx(
+        math.ceil(0.4 / memory_dt) / math.ceil(0.4 / coulomb_dt)
+    )
+
+
+def test_a_sweep_on_a_scheduler_plans_for_the_workers_it_has(sweep_dir, monkeypatch):
+    """On a running Dask cluster (``--scheduler``, and the study's arms) the batches are
+    planned for its workers, as on the embedded cluster: two workers, two batches. (Planned
+    for one, a study's arm ran one batch per model, and on two workers took twice its
+    longest model's batch.)"""
+    from dask.distributed import LocalCluster
+
+    from taichi_ice.experiments.sweep import run as run_module
+
+    planned = []
+
+    def recorded(specs, *_):
+        planned.extend(specs)
+        return iter(())  # nothing runs: the plan is what is checked
+
+    monkeypatch.setattr(run_module, "_execute", recorded)
+    sweep = load_sweep(sweep_dir / "sweep.toml")
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
+        run_sweep(sweep, sweep_dir / "out", scheduler=cluster.scheduler_address, progress=False)
+    # Every world of this sweep can share one World: one batch on one worker, two on two.
+    assert [len(spec["worlds"]) for spec in planned] == [4, 4]

@@ -99,7 +99,8 @@ def plan_batches(
 
     The batch size is the sweep's, or else each group's worlds split evenly over the
     workers (so every worker gets work), at most ``MAX_BATCH`` worlds, the group cut into
-    batches whose sizes differ by one at most.
+    batches whose sizes differ by one at most. The batches come longest first
+    (``batch_seconds``), the order in which ``run_sweep`` submits them.
 
     A worker compiles the kernels once per layout (``pool.WorldPool``), and a batch's layout
     depends on its size through the capacities: where a kind of batch (the law's kernels,
@@ -143,6 +144,10 @@ def plan_batches(
             if _pad_seconds(sweep, chunk, pad) > COMPILE_SECONDS:
                 pad = 0
         batches.append(PlannedBatch(tuple(chunk), pad))
+    # Longest first (stable): a worker that finishes early then takes a short batch, so the
+    # sweep does not end waiting on one long batch that started last (a study's models with
+    # memory take four times the steps of its Coulomb ones).
+    batches.sort(key=lambda b: -batch_seconds(sweep, b))
     return batches
 
 
@@ -182,10 +187,18 @@ class _Layouts:
 
 
 def _pad_seconds(sweep: Sweep, chunk: Sequence[Case], pad: int) -> float:
-    """Estimated seconds (one thread) to run ``pad`` more copies of a world of ``chunk``."""
+    """Estimated seconds (one thread) to run ``pad`` more copies of a world of ``chunk``, at
+    its law's step (a law with memory steps at a smaller ``dt_safety``)."""
+    from ...physics.friction_parse import law_from_table
+
     scene = _override_scene(sweep, chunk[-1].overrides, {})
-    steps = math.ceil(sweep.until / scene.dt)
+    steps = math.ceil(sweep.until / scene.with_friction(law_from_table(chunk[-1].law)).dt)
     return pad * len(scene.bodies) * steps / BODY_STEPS_PER_SECOND
+
+
+def batch_seconds(sweep: Sweep, batch: PlannedBatch) -> float:
+    """Estimated seconds (one thread) to run ``batch``, its padding included."""
+    return _pad_seconds(sweep, batch.worlds, len(batch.worlds) + batch.pad)
 
 
 def contact_slots(sweep: Sweep) -> int:

@@ -34,6 +34,7 @@ import os
 import sys
 import time
 from collections.abc import Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -315,29 +316,30 @@ def _run_sweep(sweep, out: Path, workers, scheduler, arch, precision, progress) 
     ran: list[int] = []
     world_steps = 0
     if missing:
-        if scheduler is not None:
-            n_workers = 0  # counted once connected
-        slots = contact_slots(sweep)
-        batches = plan_batches(sweep, missing, max(n_workers, 1), arch, slots)
-        specs = [batch_spec(sweep, b, runs_dir, arch, precision, slots) for b in batches]
-        say = _Reporter(progress, len(specs), len(missing), len(reused))
-        say.start(scheduler or (f"{n_workers} Dask workers" if n_workers else "this process"))
-        for spec, result, error in _execute(specs, n_workers, scheduler, say):
-            if error:
-                failed[spec["id"]] = error
-                say.failed(spec, error)
-                continue
-            result["worlds"] = [
-                {**w, "metrics": _keep(w["metrics"], sweep.metrics)} for w in result["worlds"]
-            ]
-            _write_json(out / BATCH_DIR / f"batch-{result['id']}.json", result)
-            for w in result["worlds"]:
-                done[w["key"]] = {**w, "batch": result["id"], "worker": result["worker"]}
-                ran.append(w["index"])
-            world_steps += result["world_steps"]
-            say.done(spec, result)
-        if scheduler is not None:
-            n_workers = say.workers
+        with _connected(n_workers, scheduler) as client:
+            if scheduler is not None:
+                # Counted before planning: each model's worlds are split over the workers.
+                n_workers = len(client.scheduler_info()["workers"])
+            slots = contact_slots(sweep)
+            batches = plan_batches(sweep, missing, max(n_workers, 1), arch, slots)
+            specs = [batch_spec(sweep, b, runs_dir, arch, precision, slots) for b in batches]
+            say = _Reporter(progress, len(specs), len(missing), len(reused))
+            where = f"{n_workers} Dask workers" if n_workers else "this process"
+            say.start(f"{scheduler} ({where})" if scheduler else where)
+            for spec, result, error in _execute(specs, client):
+                if error:
+                    failed[spec["id"]] = error
+                    say.failed(spec, error)
+                    continue
+                result["worlds"] = [
+                    {**w, "metrics": _keep(w["metrics"], sweep.metrics)} for w in result["worlds"]
+                ]
+                _write_json(out / BATCH_DIR / f"batch-{result['id']}.json", result)
+                for w in result["worlds"]:
+                    done[w["key"]] = {**w, "batch": result["id"], "worker": result["worker"]}
+                    ran.append(w["index"])
+                world_steps += result["world_steps"]
+                say.done(spec, result)
     elif progress:
         print(
             f"sweep: all {len(worlds)} worlds are in {out}/{BATCH_DIR}; nothing to run",
@@ -397,18 +399,14 @@ def local_cluster(workers: int):
     )
 
 
-def _execute(specs: list[dict], workers: int, scheduler: str | None, say):
-    """Yield ``(spec, result, error)`` for every batch as it completes."""
+@contextmanager
+def _connected(workers: int, scheduler: str | None):
+    """A Dask client of ``scheduler``'s cluster or of an embedded ``LocalCluster`` of
+    ``workers`` processes (closed after); None where the batches run in this process."""
     if scheduler is None and workers == 0:
-        for spec in specs:
-            try:
-                yield spec, run_batch(spec), None
-            except Interrupted:  # Ctrl-C, SIGTERM: the sweep stops (a resume runs the batch)
-                raise
-            except TaichiIceError as exc:
-                yield spec, None, str(exc)
+        yield None
         return
-    from dask.distributed import Client, as_completed
+    from dask.distributed import Client
 
     cluster = None
     if scheduler is None:
@@ -423,23 +421,46 @@ def _execute(specs: list[dict], workers: int, scheduler: str | None, say):
                 "one with `dask scheduler` and workers with `dask worker ADDRESS`"
             ) from None
     try:
-        say.workers = len(client.scheduler_info()["workers"])
-        by_key = {}
-        futures = []
-        for spec in specs:
-            f = client.submit(run_batch, spec, key=f"taichi-ice-batch-{spec['id']}", pure=False)
-            by_key[f.key] = spec
-            futures.append(f)
-        for future in as_completed(futures):
-            spec = by_key[future.key]
-            try:
-                yield spec, future.result(), None
-            except TaichiIceError as exc:
-                yield spec, None, str(exc)
+        yield client
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _execute(specs: list[dict], client):
+    """Yield ``(spec, result, error)`` for every batch as it completes, in this process where
+    ``client`` is None. Batches are submitted in ``specs``' order (longest first,
+    ``plan_batches``) and the scheduler starts them in that order."""
+    if client is None:
+        for spec in specs:
+            try:
+                yield spec, run_batch(spec), None
+            except Interrupted:  # Ctrl-C, SIGTERM: the sweep stops (a resume runs the batch)
+                raise
+            except TaichiIceError as exc:
+                yield spec, None, str(exc)
+        return
+    from dask.distributed import as_completed
+
+    by_key = {}
+    futures = []
+    for k, spec in enumerate(specs):
+        f = client.submit(
+            run_batch,
+            spec,
+            key=f"taichi-ice-batch-{spec['id']}",
+            pure=False,
+            priority=len(specs) - k,
+        )
+        by_key[f.key] = spec
+        futures.append(f)
+    for future in as_completed(futures):
+        spec = by_key[future.key]
+        try:
+            yield spec, future.result(), None
+        except TaichiIceError as exc:
+            yield spec, None, str(exc)
 
 
 class _Reporter:
@@ -451,7 +472,6 @@ class _Reporter:
         self.k = 0
         self.worlds_done = 0
         self.start_time = time.perf_counter()
-        self.workers = 0
 
     def start(self, where: str) -> None:
         if self.enabled:

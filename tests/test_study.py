@@ -309,6 +309,60 @@ def test_the_docs_script_recomputes_the_study_from_study_json(summary, capsys):
     assert "rate-state against mu0.9" in capsys.readouterr().out
 
 
+def test_the_docs_script_sets_a_study_against_another_run_of_it(summary, tmp_path, capsys):
+    """``recompute.py --against OLD``: a study against itself is equal in every value and
+    moves no verdict; with rate and state's peak force 0.1 MN higher on every layout, its shift
+    is 0.1 MN with a zero-width interval, the other models stay equal, and a verdict changed in
+    the other run is listed."""
+    import copy
+    import importlib.util
+
+    out, s = summary
+    spec = importlib.util.spec_from_file_location(
+        "recompute", Path(__file__).resolve().parents[1] / "docs" / "study" / "recompute.py"
+    )
+    recompute = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(recompute)
+    cells = recompute.strata(s["per_world"])
+    itself = recompute.against(cells, cells)
+    assert set(itself) == {arm for arm, _ in cells}
+    for arm, result in itself.items():
+        assert result["same"] == sorted(m for a, m in cells if a == arm)
+        assert result["shifts"] == []
+    assert recompute.verdicts_moved(s, s) == []
+
+    other = copy.deepcopy(s)
+    for row in other["per_world"]:
+        if row["model"] == "rate-state":
+            row["peak_force"] += 1.0e5
+    claim = other["claims"]["no strength"][0]
+    claim["verdict"] = "undecided" if claim["verdict"] != "undecided" else "holds"
+    moved = recompute.against(cells, recompute.strata(other["per_world"]))
+    for arm, result in moved.items():
+        assert result["same"] == sorted(m for a, m in cells if a == arm and m != "rate-state")
+        peak = next(r for r in result["shifts"] if r["measure"] == "peak_force")
+        assert peak["model"] == "rate-state"
+        assert peak["shift"] == pytest.approx(1.0e5, rel=1e-9)
+        assert peak["ci"] == pytest.approx([1.0e5, 1.0e5], rel=1e-9)
+        assert peak["relative"] == pytest.approx(1.0e5 / peak["default_mean"], rel=1e-9)
+        friction = next(r for r in result["shifts"] if r["measure"] == "friction_energy")
+        assert friction["shift"] == 0.0 and friction["wilcoxon_p"] == 1.0
+    assert recompute.verdicts_moved(s, other) == [
+        (
+            "no strength",
+            claim["stratum"],
+            claim["claim"],
+            claim.get("model"),
+            s["claims"]["no strength"][0]["verdict"],
+            claim["verdict"],
+        )
+    ]
+    (tmp_path / "other.json").write_text(json.dumps(other, allow_nan=True))
+    assert recompute.main([str(tmp_path / "other.json"), "--against", str(out / "study.json")]) == 0
+    said = capsys.readouterr().out
+    assert "verdicts moved: 1" in said and "rate-state     peak_force" in said
+
+
 def test_a_short_study_runs_end_to_end(tmp_path):
     """`run_study` of two layouts per stratum and the half step, 0.3 s each, in this process:
     every arm's sweep runs, and study.json, study.md, study.nc and the figures are written;

@@ -490,3 +490,19 @@ def test_a_sweep_on_a_scheduler_plans_for_the_workers_it_has(sweep_dir, monkeypa
         run_sweep(sweep, sweep_dir / "out", scheduler=cluster.scheduler_address, progress=False)
     # Every world of this sweep can share one World: one batch on one worker, two on two.
     assert [len(spec["worlds"]) for spec in planned] == [4, 4]
+
+
+def test_the_time_left_is_counted_by_the_batches_cost_not_their_worlds(monkeypatch, capsys):
+    """A sweep's progress line: after a batch estimated at three times the other's cost,
+    finished in 30 s, 10 s are left (counted by worlds, 2 of 4 done, it would say 30 s)."""
+    from taichi_ice.experiments.sweep import run as run_module
+
+    clock = iter([100.0, 130.0, 140.0])
+    monkeypatch.setattr(run_module.time, "perf_counter", lambda: next(clock))
+    say = run_module._Reporter(True, {"long": 3.0, "short": 1.0}, 4, 0)
+    result = {"worlds": [{"status": "complete"}] * 2, "world_steps": 1, "wall_time": 30.0}
+    law = {"law": "rate-state"}
+    say.done({"id": "long", "worlds": [{"law": law}] * 2}, {**result, "worker": "w"})
+    assert capsys.readouterr().err.rstrip().endswith("2/4 worlds, ~10 s left")
+    say.done({"id": "short", "worlds": [{"law": law}] * 2}, {**result, "worker": "w"})
+    assert capsys.readouterr().err.rstrip().endswith("4/4 worlds, ~0 s left")

@@ -42,7 +42,7 @@ from typing import Any
 from ..._version import __version__
 from ...errors import Interrupted, OutputError, TaichiIceError
 from ..ledger import record_digest
-from .plan import batch_spec, contact_slots, plan_batches
+from .plan import batch_seconds, batch_spec, contact_slots, plan_batches
 from .spec import Sweep, SweepError, world_scene
 
 __all__ = ["SweepResult", "load_done", "run_batch", "run_sweep"]
@@ -323,7 +323,8 @@ def _run_sweep(sweep, out: Path, workers, scheduler, arch, precision, progress) 
             slots = contact_slots(sweep)
             batches = plan_batches(sweep, missing, max(n_workers, 1), arch, slots)
             specs = [batch_spec(sweep, b, runs_dir, arch, precision, slots) for b in batches]
-            say = _Reporter(progress, len(specs), len(missing), len(reused))
+            costs = {sp["id"]: batch_seconds(sweep, b) for sp, b in zip(specs, batches)}
+            say = _Reporter(progress, costs, len(missing), len(reused))
             where = f"{n_workers} Dask workers" if n_workers else "this process"
             say.start(f"{scheduler} ({where})" if scheduler else where)
             for spec, result, error in _execute(specs, client):
@@ -464,10 +465,13 @@ def _execute(specs: list[dict], client):
 
 
 class _Reporter:
-    """A line on stderr per batch: what ran where, how fast, how much is left."""
+    """A line on stderr per batch: what ran where, how fast, how much is left (by the batches'
+    estimated cost, ``plan.batch_seconds``: a batch of a law with memory counts four times
+    a Coulomb batch of as many worlds)."""
 
-    def __init__(self, enabled: bool, n_batches: int, n_worlds: int, n_reused: int):
-        self.enabled, self.n_batches, self.n_worlds = enabled, n_batches, n_worlds
+    def __init__(self, enabled: bool, costs: dict[str, float], n_worlds: int, n_reused: int):
+        self.enabled, self.n_batches, self.n_worlds = enabled, len(costs), n_worlds
+        self.costs, self.cost_total, self.cost_done = costs, sum(costs.values()), 0.0
         self.n_reused = n_reused
         self.k = 0
         self.worlds_done = 0
@@ -486,10 +490,11 @@ class _Reporter:
     def done(self, spec: dict, result: dict) -> None:
         self.k += 1
         self.worlds_done += len(spec["worlds"])
+        self.cost_done += self.costs[spec["id"]]
         if not self.enabled:
             return
         elapsed = time.perf_counter() - self.start_time
-        left = elapsed / self.worlds_done * (self.n_worlds - self.worlds_done)
+        left = elapsed / max(self.cost_done, 1e-300) * (self.cost_total - self.cost_done)
         status = {w["status"] for w in result["worlds"]}
         rate = result["world_steps"] / max(result["wall_time"], 1e-9)
         print(
@@ -504,5 +509,6 @@ class _Reporter:
 
     def failed(self, spec: dict, error: str) -> None:
         self.k += 1
+        self.cost_done += self.costs[spec["id"]]
         if self.enabled:
             print(f"sweep: batch {spec['id']} FAILED: {error}", file=sys.stderr, flush=True)

@@ -493,16 +493,23 @@ def test_a_sweep_on_a_scheduler_plans_for_the_workers_it_has(sweep_dir, monkeypa
 
 
 def test_the_time_left_is_counted_by_the_batches_cost_not_their_worlds(monkeypatch, capsys):
-    """A sweep's progress line: after a batch estimated at three times the other's cost,
-    finished in 30 s, 10 s are left (counted by worlds, 2 of 4 done, it would say 30 s)."""
+    """A sweep's progress lines: the first estimates the wall time from the plan (its longest
+    batch, where that is longer than its share of the work); after a batch estimated at three
+    times the other's cost, finished in 30 s, 10 s are left (counted by worlds, 2 of 4 done,
+    it would say 30 s)."""
     from taichi_ice.experiments.sweep import run as run_module
 
-    clock = iter([100.0, 130.0, 140.0])
+    clock = iter([100.0, 130.0, 140.0])  # the reporter made, each batch done
     monkeypatch.setattr(run_module.time, "perf_counter", lambda: next(clock))
     say = run_module._Reporter(True, {"long": 3.0, "short": 1.0}, 4, 0)
+    say.start("2 Dask workers", 2)  # 4 s of work on two workers, its longest batch 3 s
+    assert "in 2 batches on 2 Dask workers; about 3 s at 1.2 M body-steps/s" in (
+        capsys.readouterr().err
+    )
     result = {"worlds": [{"status": "complete"}] * 2, "world_steps": 1, "wall_time": 30.0}
     law = {"law": "rate-state"}
     say.done({"id": "long", "worlds": [{"law": law}] * 2}, {**result, "worker": "w"})
     assert capsys.readouterr().err.rstrip().endswith("2/4 worlds, ~10 s left")
     say.done({"id": "short", "worlds": [{"law": law}] * 2}, {**result, "worker": "w"})
     assert capsys.readouterr().err.rstrip().endswith("4/4 worlds, ~0 s left")
+    assert [run_module._duration(s) for s in (40, 720, 12600)] == ["40 s", "12 min", "3.5 h"]

@@ -42,7 +42,13 @@ from typing import Any
 from ..._version import __version__
 from ...errors import Interrupted, OutputError, TaichiIceError
 from ..ledger import record_digest
-from .plan import batch_seconds, batch_spec, contact_slots, plan_batches
+from .plan import (
+    BODY_STEPS_PER_SECOND,
+    batch_seconds,
+    batch_spec,
+    contact_slots,
+    plan_batches,
+)
 from .spec import Sweep, SweepError, world_scene
 
 __all__ = ["SweepResult", "load_done", "run_batch", "run_sweep"]
@@ -326,7 +332,7 @@ def _run_sweep(sweep, out: Path, workers, scheduler, arch, precision, progress) 
             costs = {sp["id"]: batch_seconds(sweep, b) for sp, b in zip(specs, batches)}
             say = _Reporter(progress, costs, len(missing), len(reused))
             where = f"{n_workers} Dask workers" if n_workers else "this process"
-            say.start(f"{scheduler} ({where})" if scheduler else where)
+            say.start(f"{scheduler} ({where})" if scheduler else where, n_workers)
             for spec, result, error in _execute(specs, client):
                 if error:
                     failed[spec["id"]] = error
@@ -464,6 +470,15 @@ def _execute(specs: list[dict], client):
             yield spec, None, str(exc)
 
 
+def _duration(seconds: float) -> str:
+    """``seconds`` as a person reads a wait: 40 s, 12 min, 3.5 h."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
 class _Reporter:
     """A line on stderr per batch: what ran where, how fast, how much is left (by the batches'
     estimated cost, ``plan.batch_seconds``: a batch of a law with memory counts four times
@@ -477,12 +492,16 @@ class _Reporter:
         self.worlds_done = 0
         self.start_time = time.perf_counter()
 
-    def start(self, where: str) -> None:
+    def start(self, where: str, workers: int) -> None:
+        """The line before the first batch, with the wall time the plan estimates: its cost
+        over the workers, or its longest batch if that is longer."""
         if self.enabled:
             reused = f" ({self.n_reused} already done)" if self.n_reused else ""
+            guess = max(self.cost_total / max(workers, 1), max(self.costs.values(), default=0))
             print(
                 f"sweep: {self.n_worlds} worlds to run{reused} in {self.n_batches} batches on "
-                f"{where}",
+                f"{where}; about {_duration(guess)} at {BODY_STEPS_PER_SECOND / 1e6:g} M "
+                "body-steps/s a worker (each batch's line below says the rate measured)",
                 file=sys.stderr,
                 flush=True,
             )

@@ -2,7 +2,8 @@
 
 ``jam_dt.branch`` continues a Simulation's state at another step: at the same step it must
 step bit for bit as the Simulation it copied (else its paired branches would measure the
-copy, not the step). Its window statistics are held against direct sums.
+copy, not the step). Its window statistics are held against direct sums, and
+``interface_events``' counts against a step whose events are known.
 """
 
 import importlib.util
@@ -91,3 +92,73 @@ def test_first_seed_gives_layouts_the_default_ones_do_not_share():
     assert fresh == list(range(1000, 1128)) and not set(fresh) & set(default)
     with pytest.raises(SystemExit):  # argparse's error: the option needs a variant
         jam_dt.main(["--out", "unused", "--first-seed", "1000"])
+
+
+def test_the_interface_events_are_counted_slot_by_slot():
+    """``interface_events.count_step`` on six slots whose step is known: a contact that held
+    and ended its interface, one that started one, one whose slip reversed, one that stayed
+    stuck, one whose partner changed and an empty slot; ``live_mu`` is the law's
+    ``mu0 + theta + A ln(V / v_star)``, with V held at v_star from below."""
+    from taichi_ice.physics.friction import RateState
+    from taichi_ice.physics.slip import NEW_CONTACT, NO_INTERFACE
+
+    events = _script("interface_events")
+    law = RateState()
+    v = law.v_star
+    before = {
+        "partner": np.array([[3, 4, 5, 6, 7, -1]]),
+        "theta": np.array([[-0.1, NO_INTERFACE, -0.2, NO_INTERFACE, -0.1, NEW_CONTACT]]),
+        "slip": np.array([[2e-3, 0.0, 1e-3, 0.0, 1e-3, 0.0]]),
+    }
+    after = {
+        "partner": np.array([[3, 4, 5, 6, 8, -1]]),
+        "theta": np.array([[NO_INTERFACE, -0.05, -0.15, NO_INTERFACE, -0.1, NEW_CONTACT]]),
+        "slip": np.array([[0.5 * v, 3e-3, -1e-3, 0.2 * v, 1e-3, 0.0]]),
+    }
+    got = events.count_step(before, after, v)
+    assert got == {
+        "contact_steps": 4,  # the partner that changed and the empty slot are not held
+        "stuck_steps": 2,
+        "below_steps": 2,
+        "ends": 1,
+        "births": 1,
+        "reversals": 1,
+    }
+    theta, slip = np.array([-0.1, -0.1, 0.0]), np.array([0.1 * v, -10.0 * v, 1.0])
+    want = [law.mu0 - 0.1, law.mu0 - 0.1 + law.A * np.log(10.0), law.mu0 + law.A * np.log(1 / v)]
+    assert np.allclose(events.live_mu(theta, slip, law), want, rtol=1e-14, atol=0)
+
+
+def test_an_interface_s_life_is_counted_from_its_birth_to_its_end():
+    """``interface_events.episodes`` on one slot stepped by hand: born in step 0, a reversal
+    in step 2 (an end after 2 steps and a birth), ended in step 5 (after 3); a slot whose
+    partner changes forgets its birth, and an interface born before the span is not
+    counted."""
+    from taichi_ice.physics.slip import NO_INTERFACE
+
+    events = _script("interface_events")
+    live, none = -0.1, NO_INTERFACE
+    # theta, slip and partner of two slots after each step; slot 1 was live before the span
+    states = [
+        ((none, live), (0.0, 1e-3), (4, 5)),  # before the span
+        ((live, live), (1e-3, 1e-3), (4, 5)),  # step 0: slot 0 born
+        ((live, none), (2e-3, 0.0), (4, 5)),  # step 1: slot 1 ends (born before: uncounted)
+        ((live, live), (-1e-3, 1e-3), (4, 5)),  # step 2: slot 0 reverses; slot 1 born
+        ((live, live), (-1e-3, 1e-3), (4, 6)),  # step 3: slot 1's partner changes
+        ((live, none), (-1e-3, 0.0), (4, 6)),  # step 4
+        ((none, none), (0.0, 0.0), (4, 6)),  # step 5: slot 0 ends
+    ]
+
+    def fields(state):
+        theta, slip, partner = state
+        return {"theta": np.array(theta), "slip": np.array(slip), "partner": np.array(partner)}
+
+    born = np.full(2, -1)
+    lengths = [
+        events.episodes(fields(a), fields(b), born, k)
+        for k, (a, b) in enumerate(zip(states[:-1], states[1:]))
+    ]
+    assert lengths == [[], [], [2], [], [], [3]]
+    summary = events.episode_summary([2, 3], dt=1e-3)
+    assert summary["episodes"] == 2 and summary["episode_median_s"] == pytest.approx(2.5e-3)
+    assert summary["episode_1_step"] == 0.0 and summary["episode_at_most_4_steps"] == 1.0

@@ -317,7 +317,7 @@ def test_the_docs_script_sets_a_study_against_another_run_of_it(summary, tmp_pat
     import copy
     import importlib.util
 
-    out, s = summary
+    _, s = summary
     spec = importlib.util.spec_from_file_location(
         "recompute", Path(__file__).resolve().parents[1] / "docs" / "study" / "recompute.py"
     )
@@ -357,10 +357,21 @@ def test_the_docs_script_sets_a_study_against_another_run_of_it(summary, tmp_pat
             claim["verdict"],
         )
     ]
+    # A measure that was 0 on every layout before is printed as a shift, not a ratio.
+    before = copy.deepcopy(s)
+    for summary_ in (before, other):
+        for row in summary_["per_world"]:
+            if row["model"] == "rate-state":
+                row["jammed_fraction"] = 0.0 if summary_ is before else 0.01
+    (tmp_path / "before.json").write_text(json.dumps(before, allow_nan=True))
     (tmp_path / "other.json").write_text(json.dumps(other, allow_nan=True))
-    assert recompute.main([str(tmp_path / "other.json"), "--against", str(out / "study.json")]) == 0
+    assert (
+        recompute.main([str(tmp_path / "other.json"), "--against", str(tmp_path / "before.json")])
+        == 0
+    )
     said = capsys.readouterr().out
     assert "verdicts moved: 1" in said and "rate-state     peak_force" in said
+    assert "rate-state     jammed_fraction  n" in said and "+0.01 [+0.01, +0.01] (was 0)" in said
 
 
 def test_a_short_study_runs_end_to_end(tmp_path):

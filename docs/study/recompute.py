@@ -149,9 +149,13 @@ def _print_against(old_path: str, old: dict, new: dict) -> None:
                 continue
             low, high = r["ci"]
             mean = r["default_mean"]
+            if mean:  # relative to the old mean
+                shift, low, high = (100 * x / mean for x in (r["shift"], low, high))
+                said = f"{shift:+.1f} % [{low:+.1f}, {high:+.1f}]"
+            else:  # a measure that was 0 on every layout: the shift itself
+                said = f"{r['shift']:+.4g} [{low:+.4g}, {high:+.4g}] (was 0)"
             print(
-                f"    {r['model']:<14} {r['measure']:<16} n {r['n']:3d} shift "
-                f"{100 * r['relative']:+.1f} % [{100 * low / mean:+.1f}, {100 * high / mean:+.1f}]"
+                f"    {r['model']:<14} {r['measure']:<16} n {r['n']:3d} shift {said}"
                 f" p {r['wilcoxon_p']:.2g} (Holm {r['wilcoxon_p_holm']:.2g})"
             )
     moved = verdicts_moved(old, new)

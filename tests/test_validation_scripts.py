@@ -95,9 +95,9 @@ def test_first_seed_gives_layouts_the_default_ones_do_not_share():
 
 
 def test_the_interface_events_are_counted_slot_by_slot():
-    """``interface_events.count_step`` on six slots whose step is known: a contact that held
+    """``interface_events.count_step`` on seven slots whose step is known: a contact that held
     and ended its interface, one that started one, one whose slip reversed, one that stayed
-    stuck, one whose partner changed and an empty slot; ``live_mu`` is the law's
+    stuck, one whose partner changed, an empty slot and a first touch; ``live_mu`` is the law's
     ``mu0 + theta + A ln(V / v_star)``, with V held at v_star from below."""
     from taichi_ice.physics.friction import RateState
     from taichi_ice.physics.slip import NEW_CONTACT, NO_INTERFACE
@@ -106,18 +106,23 @@ def test_the_interface_events_are_counted_slot_by_slot():
     law = RateState()
     v = law.v_star
     before = {
-        "partner": np.array([[3, 4, 5, 6, 7, -1]]),
-        "theta": np.array([[-0.1, NO_INTERFACE, -0.2, NO_INTERFACE, -0.1, NEW_CONTACT]]),
-        "slip": np.array([[2e-3, 0.0, 1e-3, 0.0, 1e-3, 0.0]]),
+        "partner": np.array([[3, 4, 5, 6, 7, -1, 9]]),
+        "theta": np.array(
+            [[-0.1, NO_INTERFACE, -0.2, NO_INTERFACE, -0.1, NEW_CONTACT, NEW_CONTACT]]
+        ),
+        "slip": np.array([[2e-3, 0.0, 1e-3, 0.0, 1e-3, 0.0, 0.0]]),
     }
     after = {
-        "partner": np.array([[3, 4, 5, 6, 8, -1]]),
-        "theta": np.array([[NO_INTERFACE, -0.05, -0.15, NO_INTERFACE, -0.1, NEW_CONTACT]]),
-        "slip": np.array([[0.5 * v, 3e-3, -1e-3, 0.2 * v, 1e-3, 0.0]]),
+        "partner": np.array([[3, 4, 5, 6, 8, -1, 9]]),
+        "theta": np.array([[NO_INTERFACE, -0.05, -0.15, NO_INTERFACE, -0.1, NEW_CONTACT, -0.1]]),
+        "slip": np.array([[0.5 * v, 3e-3, -1e-3, 0.2 * v, 1e-3, 0.0, 2e-3]]),
     }
     got = events.count_step(before, after, v)
+    assert events.births(before, after).tolist() == [[0, 1, 0, 0, 0, 0, 0]]
     assert got == {
-        "contact_steps": 4,  # the partner that changed and the empty slot are not held
+        # the partner that changed and the empty slot are not held; the last slot's first
+        # touch (it held NEW_CONTACT) starts a contact, not a held contact's new interface
+        "contact_steps": 5,
         "stuck_steps": 2,
         "below_steps": 2,
         "ends": 1,

@@ -9,10 +9,12 @@ decides both on its own slip rate, once a step. This script counts, contact by c
 step by step, what the rule decides in a jam:
 
 - ``ends``: an interface ended while its contact held (theta from a value to ``NO_INTERFACE``);
-- ``births``: a held contact started an interface (the reverse);
+- ``births``: a held contact started an interface (the reverse; not a contact's first
+  touch, whose slot held ``NEW_CONTACT``);
 - ``reversals``: a live interface whose slip changed sign (ended and started again in one step);
 - ``stuck``: the share of contact-steps with no interface (slip at or below ``v_star``);
 - ``mu_live``: the mean friction coefficient of the contacts with an interface;
+- the slip rate an interface starts at, over ``v_star`` (quantiles);
 - how long the interfaces born in the span lived, in steps and seconds: an interface that
   lives a step or two at every dt is chatter at the step's own scale, one that lives a
   fixed time is a physical event the step resolves or not.
@@ -55,15 +57,25 @@ def count_step(before: dict, after: dict, v_star: float) -> dict:
     held = (after["partner"] >= 0) & (after["partner"] == before["partner"])
     live0 = before["theta"] < NO_INTERFACE_ABOVE
     live1 = after["theta"] < NO_INTERFACE_ABOVE
+    none0 = (before["theta"] > NO_INTERFACE_ABOVE) & (before["theta"] < NEW_CONTACT_ABOVE)
     none1 = (after["theta"] > NO_INTERFACE_ABOVE) & (after["theta"] < NEW_CONTACT_ABOVE)
     return {
         "contact_steps": int(held.sum()),
         "stuck_steps": int((held & none1).sum()),
         "below_steps": int((held & (np.abs(after["slip"]) <= v_star)).sum()),
         "ends": int((held & live0 & none1).sum()),
-        "births": int((held & ~live0 & live1).sum()),
+        "births": int((held & none0 & live1).sum()),
         "reversals": int((held & live0 & live1 & (before["slip"] * after["slip"] < 0)).sum()),
     }
+
+
+def births(before: dict, after: dict) -> np.ndarray:
+    """Where a held contact started an interface in the step (``count_step``'s births)."""
+    from taichi_ice.physics.slip import NEW_CONTACT_ABOVE, NO_INTERFACE_ABOVE
+
+    held = (after["partner"] >= 0) & (after["partner"] == before["partner"])
+    none0 = (before["theta"] > NO_INTERFACE_ABOVE) & (before["theta"] < NEW_CONTACT_ABOVE)
+    return held & none0 & (after["theta"] < NO_INTERFACE_ABOVE)
 
 
 def episodes(before: dict, after: dict, born: np.ndarray, k: int) -> list[int]:
@@ -77,12 +89,13 @@ def episodes(before: dict, after: dict, born: np.ndarray, k: int) -> list[int]:
     held = (after["partner"] >= 0) & (after["partner"] == before["partner"])
     live0 = before["theta"] < NO_INTERFACE_ABOVE
     live1 = after["theta"] < NO_INTERFACE_ABOVE
+    none0 = (before["theta"] > NO_INTERFACE_ABOVE) & (before["theta"] < NEW_CONTACT_ABOVE)
     none1 = (after["theta"] > NO_INTERFACE_ABOVE) & (after["theta"] < NEW_CONTACT_ABOVE)
     reversed_ = held & live0 & live1 & (before["slip"] * after["slip"] < 0)
     ended = held & live0 & (none1 | reversed_) & (born >= 0)
     out = (k - born[ended]).tolist()
     born[~held | (live0 & none1)] = -1
-    born[held & ((~live0 & live1) | reversed_)] = k  # a reversal ends one and starts one
+    born[held & ((none0 & live1) | reversed_)] = k  # a reversal ends one and starts one
     return out
 
 
@@ -151,6 +164,7 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
         mu_sum, mu_n = 0.0, 0
         born = np.full(before["partner"].shape, -1)  # the step each slot's interface began
         lengths = []  # steps each interface born in the span lived to its end
+        birth_slips = []  # |slip| / v_star of each interface started, in its first step
         start = time.perf_counter()
         for k in range(n):
             world.advance(1)
@@ -158,6 +172,7 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
             for key, value in count_step(before, after, law.v_star).items():
                 totals[key] = totals.get(key, 0) + value
             lengths += episodes(before, after, born, k)
+            birth_slips.append(np.abs(after["slip"][births(before, after)]) / law.v_star)
             live = (after["partner"] >= 0) & (after["theta"] < NO_INTERFACE_ABOVE)
             mu = live_mu(after["theta"][live], after["slip"][live], law)
             mu_sum, mu_n = mu_sum + float(mu.sum()), mu_n + mu.size
@@ -176,6 +191,11 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
             "below_share": totals["below_steps"] / totals["contact_steps"],
             "mu_live": mu_sum / max(mu_n, 1),
             **episode_summary(lengths, world.dt),
+            "birth_slip_over_v_star_q10_q50_q90": np.quantile(
+                np.concatenate(birth_slips), [0.1, 0.5, 0.9]
+            ).tolist()
+            if totals["births"]
+            else None,
             "wall_s": time.perf_counter() - start,
         }
         del sim, world

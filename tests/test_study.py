@@ -273,18 +273,24 @@ def test_report_writes_json_markdown_netcdf_and_figures(summary):
     json.dumps(s, allow_nan=True)
 
 
-def test_the_docs_script_recomputes_the_study_from_study_json(summary, capsys):
-    """docs/study/recompute.py reads per_world alone: its jam counts are the report's, with
-    the exact interval; mu = 0.9 holds every jam rate-and-state releases (McNemar p 2/2^16)
-    and its share of time jammed is the report's Wilcoxon p."""
+def _recompute():
+    """docs/study/recompute.py as a module (a script beside the docs, not in the package)."""
     import importlib.util
 
-    out, s = summary
     spec = importlib.util.spec_from_file_location(
         "recompute", Path(__file__).resolve().parents[1] / "docs" / "study" / "recompute.py"
     )
     recompute = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(recompute)
+    return recompute
+
+
+def test_the_docs_script_recomputes_the_study_from_study_json(summary, capsys):
+    """docs/study/recompute.py reads per_world alone: its jam counts are the report's, with
+    the exact interval; mu = 0.9 holds every jam rate-and-state releases (McNemar p 2/2^16)
+    and its share of time jammed is the report's Wilcoxon p."""
+    out, s = summary
+    recompute = _recompute()
     cells = recompute.strata(s["per_world"])
     for arm, model, k, n, low, high in recompute.jam_table(cells):
         want = s["described"][arm][model]["jam"]
@@ -315,14 +321,9 @@ def test_the_docs_script_sets_a_study_against_another_run_of_it(summary, tmp_pat
     is 0.1 MN with a zero-width interval, the other models stay equal, and a verdict changed in
     the other run is listed."""
     import copy
-    import importlib.util
 
     _, s = summary
-    spec = importlib.util.spec_from_file_location(
-        "recompute", Path(__file__).resolve().parents[1] / "docs" / "study" / "recompute.py"
-    )
-    recompute = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(recompute)
+    recompute = _recompute()
     cells = recompute.strata(s["per_world"])
     itself = recompute.against(cells, cells)
     assert set(itself) == {arm for arm, _ in cells}

@@ -164,6 +164,12 @@ def test_an_interface_s_life_is_counted_from_its_birth_to_its_end():
         for k, (a, b) in enumerate(zip(states[:-1], states[1:]))
     ]
     assert lengths == [[], [], [2], [], [], [3]]
+    born = np.full(2, -1)  # under the other rules a reversal does not end the interface
+    kept = [
+        events.episodes(fields(a), fields(b), born, k, reversal_ends=False)
+        for k, (a, b) in enumerate(zip(states[:-1], states[1:]))
+    ]
+    assert kept == [[], [], [], [], [], [5]]
     summary = events.episode_summary([2, 3], dt=1e-3)
     assert summary["episodes"] == 2 and summary["episode_median_s"] == pytest.approx(2.5e-3)
     assert summary["episode_1_step"] == 0.0 and summary["episode_at_most_4_steps"] == 1.0

@@ -11,9 +11,11 @@ step by step, what the rule decides in a jam:
 - ``ends``: an interface ended while its contact held (theta from a value to ``NO_INTERFACE``);
 - ``births``: a held contact started an interface (the reverse; not a contact's first
   touch, whose slot held ``NEW_CONTACT``);
-- ``reversals``: a live interface whose slip changed sign (ended and started again in one step);
+- ``reversals``: a live interface whose slip changed sign (under the paper's rule, ended and
+  started again in one step; under the others it goes on);
 - ``stuck``: the share of contact-steps with no interface (slip at or below ``v_star``);
-- ``mu_live``: the mean friction coefficient of the contacts with an interface;
+- ``mu_live``: the mean friction coefficient of the contacts with an interface, ``mu_all``
+  of every held contact (mu0 without one);
 - the slip rate an interface starts at, over ``v_star`` (quantiles);
 - how long the interfaces born in the span lived, in steps and seconds: an interface that
   lives a step or two at every dt is chatter at the step's own scale, one that lives a
@@ -24,7 +26,8 @@ step by step, what the rule decides in a jam:
 ``--steps`` runs ``--span`` seconds, its contacts read after every step. A contact lives in
 one slot (its owner body's), so the rates are per contact; each step's fields are read
 through NumPy, so the finest step takes minutes. Writes ``interface_events.json`` and prints
-the table (docs/accuracy.md quotes it).
+the table (docs/accuracy.md quotes it). ``--rule healing`` (or ``frozen``) runs the same
+under that rule below v_star, from its own jam (the run to ``--t0`` under it too).
 """
 
 from __future__ import annotations
@@ -78,10 +81,13 @@ def births(before: dict, after: dict) -> np.ndarray:
     return held & none0 & (after["theta"] < NO_INTERFACE_ABOVE)
 
 
-def episodes(before: dict, after: dict, born: np.ndarray, k: int) -> list[int]:
+def episodes(
+    before: dict, after: dict, born: np.ndarray, k: int, reversal_ends: bool = True
+) -> list[int]:
     """The lengths (steps) of the interfaces that ended in step ``k`` (counted from 0) of a
-    contact that held since their birth in the span (a slip that changed sign ends one and
-    starts the next), and ``born`` brought up to date: the
+    contact that held since their birth in the span (under the paper's rule,
+    ``reversal_ends``, a slip that changed sign ends one and starts the next), and ``born``
+    brought up to date: the
     step of each slot's birth, -1 where none was seen (a slot whose partner changed, or an
     interface older than the span)."""
     from taichi_ice.physics.slip import NEW_CONTACT_ABOVE, NO_INTERFACE_ABOVE
@@ -91,7 +97,7 @@ def episodes(before: dict, after: dict, born: np.ndarray, k: int) -> list[int]:
     live1 = after["theta"] < NO_INTERFACE_ABOVE
     none0 = (before["theta"] > NO_INTERFACE_ABOVE) & (before["theta"] < NEW_CONTACT_ABOVE)
     none1 = (after["theta"] > NO_INTERFACE_ABOVE) & (after["theta"] < NEW_CONTACT_ABOVE)
-    reversed_ = held & live0 & live1 & (before["slip"] * after["slip"] < 0)
+    reversed_ = held & live0 & live1 & (before["slip"] * after["slip"] < 0) & reversal_ends
     ended = held & live0 & (none1 | reversed_) & (born >= 0)
     out = (k - born[ended]).tolist()
     born[~held | (live0 & none1)] = -1
@@ -132,14 +138,15 @@ def _fields(world) -> dict:
     }
 
 
-def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) -> dict:
-    """The counts at each step of ``steps`` over ``span`` s from the state at ``t0``."""
-    from taichi_ice.physics.slip import NO_INTERFACE_ABOVE
+def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1, rule=None) -> dict:
+    """The counts at each step of ``steps`` over ``span`` s from the state at ``t0``, under
+    the rule below v_star ``rule`` (None: the paper's, the scene's own)."""
+    from taichi_ice.physics.slip import NEW_CONTACT_ABOVE, NO_INTERFACE_ABOVE
     from taichi_ice.run.simulation import Simulation
     from taichi_ice.scene.parse import reseeded
 
     jam_dt = _jam_dt()
-    base = jam_dt._scene()
+    base = jam_dt._scene(rule=rule)
     scenes = [base] + [reseeded(base, s) for s in range(first_seed, first_seed + layouts - 1)]
     law = base.friction
     source = Simulation(scenes)
@@ -153,6 +160,7 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
         "source_dt_over_stable": source.world.dt / base.stable_dt,
         "source_wall_s": time.perf_counter() - start,
         "v_star": law.v_star,
+        "rule": law.below_v_star,
         "steps": {},
     }
     for ratio in steps:
@@ -162,6 +170,7 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
         before = _fields(world)
         totals: dict = {}
         mu_sum, mu_n = 0.0, 0
+        all_sum, all_n = 0.0, 0
         born = np.full(before["partner"].shape, -1)  # the step each slot's interface began
         lengths = []  # steps each interface born in the span lived to its end
         birth_slips = []  # |slip| / v_star of each interface started, in its first step
@@ -171,11 +180,14 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
             after = _fields(world)
             for key, value in count_step(before, after, law.v_star).items():
                 totals[key] = totals.get(key, 0) + value
-            lengths += episodes(before, after, born, k)
+            lengths += episodes(before, after, born, k, law.below_v_star == "paper")
             birth_slips.append(np.abs(after["slip"][births(before, after)]) / law.v_star)
             live = (after["partner"] >= 0) & (after["theta"] < NO_INTERFACE_ABOVE)
             mu = live_mu(after["theta"][live], after["slip"][live], law)
             mu_sum, mu_n = mu_sum + float(mu.sum()), mu_n + mu.size
+            none = (after["partner"] >= 0) & ~live & (after["theta"] < NEW_CONTACT_ABOVE)
+            all_sum += float(mu.sum()) + law.mu0 * int(none.sum())  # no interface: mu0
+            all_n += mu.size + int(none.sum())
             before = after
         world.check()
         seconds = totals["contact_steps"] * world.dt
@@ -190,6 +202,7 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
             "stuck_share": totals["stuck_steps"] / totals["contact_steps"],
             "below_share": totals["below_steps"] / totals["contact_steps"],
             "mu_live": mu_sum / max(mu_n, 1),
+            "mu_all": all_sum / max(all_n, 1),
             **episode_summary(lengths, world.dt),
             "birth_slip_over_v_star_q10_q50_q90": np.quantile(
                 np.concatenate(birth_slips), [0.1, 0.5, 0.9]
@@ -205,8 +218,9 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1) 
 def table(result: dict) -> str:
     rows = [
         "| step (stable_dt) | steps | contact-s | ends /s | births /s | reversals /s | stuck "
-        "| mean mu, live | interfaces born and ended | of 1 step | of <= 4 | median life |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| mean mu, live | mean mu, all | interfaces born and ended | of 1 step | of <= 4 "
+        "| median life |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for ratio, r in result["steps"].items():
         lived = "| 0 | - | - | - |"
@@ -218,7 +232,7 @@ def table(result: dict) -> str:
         rows.append(
             f"| {ratio} | {r['n_steps']} | {r['contact_seconds']:.0f} | {r['ends_per_s']:.2f} | "
             f"{r['births_per_s']:.2f} | {r['reversals_per_s']:.2f} | {r['stuck_share']:.3f} | "
-            f"{r['mu_live']:.4f} " + lived
+            f"{r['mu_live']:.4f} | {r['mu_all']:.4f} " + lived
         )
     return "\n".join(rows)
 
@@ -231,13 +245,17 @@ def main(argv=None) -> int:
     parser.add_argument("--t0", type=float, default=15.0, help="s: where the branches start")
     parser.add_argument("--span", type=float, default=0.5, help="s each step runs")
     parser.add_argument(
+        "--rule", choices=("paper", "healing", "frozen"), help="the rule below v_star"
+    )
+    parser.add_argument(
         "--steps", default=",".join(map(str, STEPS)), help="dt / stable_dt, comma-separated"
     )
     args = parser.parse_args(argv)
     steps = [float(s) for s in args.steps.split(",")]
-    result = run(args.layouts, args.t0, args.span, steps, args.first_seed)
+    result = run(args.layouts, args.t0, args.span, steps, args.first_seed, args.rule)
     args.out.mkdir(parents=True, exist_ok=True)
-    name = f"interface_events_t{args.t0:g}_seed{args.first_seed}.json"
+    rule = f"_{args.rule}" if args.rule else ""
+    name = f"interface_events_t{args.t0:g}_seed{args.first_seed}{rule}.json"
     (args.out / name).write_text(json.dumps(result, indent=1))
     print(table(result))
     print(f"wrote {args.out / name}")

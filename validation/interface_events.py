@@ -51,34 +51,45 @@ def _jam_dt():
     return module
 
 
-def count_step(before: dict, after: dict, v_star: float) -> dict:
-    """What the rule decided in one step, over every slot whose contact held through it
-    (the same partner before and after). ``before`` and ``after``: ``partner``, ``theta`` and
-    ``slip`` arrays of equal shape (the World's ``contact_*`` fields)."""
+def _states(before: dict, after: dict) -> dict:
+    """Each slot's state either side of a step: ``held`` (the same partner before and
+    after), ``live0``/``live1`` (an interface), ``none0``/``none1`` (touching, no
+    interface: ``NO_INTERFACE``; a slot at ``NEW_CONTACT`` is neither)."""
     from taichi_ice.physics.slip import NEW_CONTACT_ABOVE, NO_INTERFACE_ABOVE
 
-    held = (after["partner"] >= 0) & (after["partner"] == before["partner"])
-    live0 = before["theta"] < NO_INTERFACE_ABOVE
-    live1 = after["theta"] < NO_INTERFACE_ABOVE
-    none0 = (before["theta"] > NO_INTERFACE_ABOVE) & (before["theta"] < NEW_CONTACT_ABOVE)
-    none1 = (after["theta"] > NO_INTERFACE_ABOVE) & (after["theta"] < NEW_CONTACT_ABOVE)
+    def none(theta):
+        return (theta > NO_INTERFACE_ABOVE) & (theta < NEW_CONTACT_ABOVE)
+
     return {
-        "contact_steps": int(held.sum()),
-        "stuck_steps": int((held & none1).sum()),
-        "below_steps": int((held & (np.abs(after["slip"]) <= v_star)).sum()),
-        "ends": int((held & live0 & none1).sum()),
-        "births": int((held & none0 & live1).sum()),
-        "reversals": int((held & live0 & live1 & (before["slip"] * after["slip"] < 0)).sum()),
+        "held": (after["partner"] >= 0) & (after["partner"] == before["partner"]),
+        "live0": before["theta"] < NO_INTERFACE_ABOVE,
+        "live1": after["theta"] < NO_INTERFACE_ABOVE,
+        "none0": none(before["theta"]),
+        "none1": none(after["theta"]),
     }
 
 
 def births(before: dict, after: dict) -> np.ndarray:
-    """Where a held contact started an interface in the step (``count_step``'s births)."""
-    from taichi_ice.physics.slip import NEW_CONTACT_ABOVE, NO_INTERFACE_ABOVE
+    """Where a held contact started an interface in the step (from ``NO_INTERFACE``: not a
+    contact's first touch)."""
+    m = _states(before, after)
+    return m["held"] & m["none0"] & m["live1"]
 
-    held = (after["partner"] >= 0) & (after["partner"] == before["partner"])
-    none0 = (before["theta"] > NO_INTERFACE_ABOVE) & (before["theta"] < NEW_CONTACT_ABOVE)
-    return held & none0 & (after["theta"] < NO_INTERFACE_ABOVE)
+
+def count_step(before: dict, after: dict, v_star: float) -> dict:
+    """What the rule decided in one step, over every slot whose contact held through it
+    (the same partner before and after). ``before`` and ``after``: ``partner``, ``theta`` and
+    ``slip`` arrays of equal shape (the World's ``contact_*`` fields)."""
+    m = _states(before, after)
+    held, live0, live1 = m["held"], m["live0"], m["live1"]
+    return {
+        "contact_steps": int(held.sum()),
+        "stuck_steps": int((held & m["none1"]).sum()),
+        "below_steps": int((held & (np.abs(after["slip"]) <= v_star)).sum()),
+        "ends": int((held & live0 & m["none1"]).sum()),
+        "births": int(births(before, after).sum()),
+        "reversals": int((held & live0 & live1 & (before["slip"] * after["slip"] < 0)).sum()),
+    }
 
 
 def episodes(
@@ -87,21 +98,15 @@ def episodes(
     """The lengths (steps) of the interfaces that ended in step ``k`` (counted from 0) of a
     contact that held since their birth in the span (under the paper's rule,
     ``reversal_ends``, a slip that changed sign ends one and starts the next), and ``born``
-    brought up to date: the
-    step of each slot's birth, -1 where none was seen (a slot whose partner changed, or an
-    interface older than the span)."""
-    from taichi_ice.physics.slip import NEW_CONTACT_ABOVE, NO_INTERFACE_ABOVE
-
-    held = (after["partner"] >= 0) & (after["partner"] == before["partner"])
-    live0 = before["theta"] < NO_INTERFACE_ABOVE
-    live1 = after["theta"] < NO_INTERFACE_ABOVE
-    none0 = (before["theta"] > NO_INTERFACE_ABOVE) & (before["theta"] < NEW_CONTACT_ABOVE)
-    none1 = (after["theta"] > NO_INTERFACE_ABOVE) & (after["theta"] < NEW_CONTACT_ABOVE)
+    brought up to date: the step of each slot's birth, -1 where none was seen (a slot whose
+    partner changed, or an interface older than the span)."""
+    m = _states(before, after)
+    held, live0, live1, none1 = m["held"], m["live0"], m["live1"], m["none1"]
     reversed_ = held & live0 & live1 & (before["slip"] * after["slip"] < 0) & reversal_ends
     ended = held & live0 & (none1 | reversed_) & (born >= 0)
     out = (k - born[ended]).tolist()
     born[~held | (live0 & none1)] = -1
-    born[held & ((none0 & live1) | reversed_)] = k  # a reversal ends one and starts one
+    born[held & ((m["none0"] & live1) | reversed_)] = k  # a reversal ends one and starts one
     return out
 
 

@@ -109,6 +109,8 @@ class RestRule(_Labelled):
     HEALING = 1  # theta keeps relaxing toward 0 (the equilibrium at v_star) over t_c, and
     #              mu = max(mu0 + theta, 0): the aging law's healing
     FROZEN = 2  # theta is held, mu = max(mu0 + theta, 0), until the contact slides again
+    RELAXING = 3  # the paper's mu = mu0 exactly, but the interface is kept: theta relaxes
+    #               toward 0 over t_c as under HEALING, and slides on from there
 
 
 class Status(_Labelled):

@@ -109,3 +109,25 @@ def test_paper_rule_block_holds_at_0_8_and_slides_at_1_2(f64):
         s["closed_form_acceleration"], rel=SLIDE_ACCELERATION_RTOL
     )
     assert s["max_abs_mu_contact_minus_law"] < SLIDE_MU_ATOL
+
+
+def test_relaxing_rule_mu0_does_not_hold_a_contact_whose_kept_theta_is_weak(f64):
+    """Under ``relaxing`` a contact that slid to a stop keeps its weak theta (healing over
+    t_c), and the paper's mu0 below v_star applies only where the law would slide slower
+    than v_star: the law at v_star, mu0 + theta, is the contact's strength. At 0.8 mu0 F,
+    which the paper's rule holds (above), it slides off, and its acceleration is Newton's
+    with the friction its contact gave, that friction the law's along its slip."""
+    summary = dem_contact.hold_slide(rules=("relaxing",), loads=(0.8,))
+    case = summary["cases"]["relaxing"]["0.8"]
+    law = RateState()
+    assert case["slid_before_load_m"] > 1e-4
+    theta = case["theta_at_load"]
+    assert theta is not None and law.mu0 + theta < 0.8 * law.mu0  # kept, and weak
+    assert case["mu_at_load"] == pytest.approx(law.mu0 + theta, abs=1e-12)
+    assert not case["held"] and case["interface_under_load"]
+    s = case["slide"]
+    assert s["acceleration"] > 0.0
+    assert s["acceleration"] == pytest.approx(
+        s["closed_form_acceleration"], rel=SLIDE_ACCELERATION_RTOL
+    )
+    assert s["max_abs_mu_contact_minus_law"] < SLIDE_MU_ATOL

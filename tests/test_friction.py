@@ -211,14 +211,14 @@ def test_convergence_orders(profile, expected):
 
 def test_below_v_star_mu_is_mu0():
     """An interface that starts and stays below V* has mu = mu0 exactly under every rule:
-    no interface (theta NaN) under the paper's, theta = 0 under healing and frozen."""
+    no interface (theta NaN) under the paper's, theta = 0 under the others."""
     rng = np.random.default_rng(3)
     t = np.cumsum(rng.uniform(0.01, 1.0, 200))
     v = rng.uniform(0.0, V_STAR, 200)
     for method in ALL_METHODS:
         mu, theta = LAW.respond(t, v, method=method, return_theta=True)
         assert np.all(mu == MU0) and np.all(np.isnan(theta))
-        for rule in ("healing", "frozen"):
+        for rule in ("healing", "frozen", "relaxing"):
             law = RateState(below_v_star=rule)
             mu, theta = law.respond(t, v, method=method, return_theta=True)
             assert np.all(mu == MU0) and np.all(theta == 0.0)
@@ -245,6 +245,30 @@ def test_slide_stop_slide_under_each_rule():
     assert np.allclose(healing[stopped], expected, atol=2e-3)  # decays from the stop
     peak = MU0 + theta_stop * math.exp(-5.0 / T_C) + A * x
     assert healing[again] == pytest.approx(peak, abs=2e-3)  # the aging law's peak
+
+
+def test_relaxing_keeps_mu0_below_v_star_and_the_interface_through_the_stop():
+    """``relaxing``: while stopped mu = mu0 exactly (the paper's constant friction) and theta
+    decays from the stop as exp(-t / t_c) (eq. 2b at V = V*); at the restart the interface
+    goes on from that theta: mu0 + theta_stop e^{-5 / t_c} + A x, the healing rule's peak,
+    not the paper's new interface at mu_ss. Above V* it is the healing rule's law."""
+    t = np.linspace(0.0, 30.0, 30001)
+    v = np.where((t > 10.0) & (t < 15.0), 0.0, 1e-3)
+    x = math.log(1e-3 / V_STAR)
+    stopped, again = (t > 10.0) & (t < 15.0), np.searchsorted(t, 15.0)
+    for method in ALL_METHODS:
+        relaxing = RateState(below_v_star="relaxing")
+        mu, theta = relaxing.respond(t, v, method=method, return_theta=True)
+        assert np.all(mu[stopped] == MU0)
+        late = stopped & (t > 10.5)
+        expected = -B * x * np.exp(-(t[late] - 10.0) / T_C)
+        assert np.allclose(theta[late], expected, rtol=2e-3, atol=0)
+        peak = MU0 - B * x * math.exp(-5.0 / T_C) + A * x
+        assert mu[again] == pytest.approx(peak, abs=2e-3)
+        assert mu[again] > MU0 + (A - B) * x + 0.05  # healed: stronger than the steady state
+        healing = RateState(below_v_star="healing").respond(t, v, method=method)
+        sliding = v > V_STAR
+        assert np.array_equal(mu[sliding], healing[sliding])
 
 
 def test_after_slowing_below_v_star_theta_relaxes_to_zero():

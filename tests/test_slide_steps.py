@@ -170,7 +170,7 @@ def test_taichi_twin_matches_numpy_on_random_contacts(taichi_runtime):
             rng.choice([0.0, 0.1, 0.02, 1e-300], n),  # the last: capped at SLIDE_STEPS_MOST
         ]
     )
-    codes = np.column_stack([rng.integers(0, 2, n), rng.integers(0, 3, n)])
+    codes = np.column_stack([rng.integers(0, 2, n), rng.integers(0, len(RestRule), n)])
     steps = [slide_steps(r[5], r[6], r[7], c[0], r[13]) for r, c in zip(rows, codes)]
     assert sum(s > 1 for s in steps) > n // 4
     for method in ThetaMethod:

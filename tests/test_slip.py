@@ -134,21 +134,22 @@ def test_carried_interface_updates_theta_exponentially_at_the_solved_rate():
 def test_a_slip_that_reverses_ends_the_interface_under_the_paper_rule():
     """Between two steps of opposite slip the slip passed through zero: under the paper's
     rule the interface ended there (a weak theta is forgotten and mu0 holds the load);
-    healing and frozen keep their theta through the reversal."""
+    healing, frozen and relaxing keep their theta through the reversal."""
     f_n, K, theta = 1e4, 2e4, -1.2  # theta after a fast slide: mu near 0 at low speed
     load = 0.8 * MU0 * f_n
     same = solve(theta, load, f_n, K, slip=-1e-3, last_slip=-1e-3)
     assert abs(same[2]) > V_STAR  # no reversal: the weak interface slides on
     mu, th, v = solve(theta, load, f_n, K, slip=-1e-3, last_slip=1e-3)
     assert (mu, th, v) == (MU0, NO_INTERFACE, 0.0)  # reversed: at rest, mu0 holds
-    for rule in (RestRule.HEALING, RestRule.FROZEN):
+    for rule in (RestRule.HEALING, RestRule.FROZEN, RestRule.RELAXING):
         kept = solve(theta, load, f_n, K, slip=-1e-3, last_slip=1e-3, rule=rule)
         assert kept[1] < 0.0 and abs(kept[2]) > V_STAR
 
 
 def test_rules_below_v_star():
     """Slower than v_star: paper mu0 and no interface; healing steps theta with x = 0;
-    frozen holds it; both with mu = max(mu0 + theta, 0)."""
+    frozen holds it; both with mu = max(mu0 + theta, 0); relaxing steps theta as healing
+    does and takes mu0."""
     f_n, K, theta = 1e4, 2e4, -0.5
     f_trial = 0.2 * f_n  # below mu(v_star) F_n = 0.372 F_n: no root at or above v_star
     mu, th, v = solve(theta, f_trial, f_n, K, rule=RestRule.PAPER)
@@ -158,11 +159,16 @@ def test_rules_below_v_star():
     assert mu == pytest.approx(MU0 + th, abs=1e-15) and v == 0.0
     mu, th, v = solve(theta, f_trial, f_n, K, rule=RestRule.FROZEN)
     assert th == theta and mu == pytest.approx(MU0 + theta, abs=1e-15) and v == 0.0
+    mu, th, v = solve(theta, f_trial, f_n, K, rule=RestRule.RELAXING)
+    assert th == pytest.approx(theta * math.exp(-DT / T_C), abs=1e-15)
+    assert mu == MU0 and v == 0.0  # the paper's mu0, the interface kept
     # A contact stuck after sliding: under the paper's rule it has no interface and holds
     # 0.6 F_n; frozen, it kept theta = -0.5 and slides.
     f_trial = 0.6 * f_n
     assert solve(NO_INTERFACE, f_trial, f_n, K, rule=RestRule.PAPER)[2] == 0.0
     assert solve(theta, f_trial, f_n, K, rule=RestRule.FROZEN)[2] > V_STAR
+    # Relaxing: mu0 holds the stuck contact, though it kept theta = -0.5 (0.6 F_n < mu0 F_n).
+    assert solve(theta, f_trial, f_n, K, slip=1e-6, rule=RestRule.RELAXING)[:3:2] == (MU0, 0.0)
 
 
 def test_coulomb_row_slides_at_exactly_mu():
@@ -205,7 +211,7 @@ def test_taichi_twin_matches_numpy_on_random_contacts(taichi_runtime):
             rng.uniform(0.5, 5.0, n),
         ]
     )
-    codes = np.column_stack([rng.integers(0, 2, n), rng.integers(0, 3, n)])
+    codes = np.column_stack([rng.integers(0, 2, n), rng.integers(0, len(RestRule), n)])
     for method in ThetaMethod:
         got = contact_friction_batch_ti(rows, codes, int(method))
         want = np.array(

@@ -98,7 +98,8 @@ def test_the_interface_events_are_counted_slot_by_slot():
     """``interface_events.count_step`` on seven slots whose step is known: a contact that held
     and ended its interface, one that started one, one whose slip reversed, one that stayed
     stuck, one whose partner changed, an empty slot and a first touch; ``live_mu`` is the law's
-    ``mu0 + theta + A ln(V / v_star)``, with V held at v_star from below."""
+    ``mu0 + theta + A ln(V / v_star)``, with V held at v_star from below (mu0 below it under
+    ``relaxing``)."""
     from taichi_ice.physics.friction import RateState
     from taichi_ice.physics.slip import NEW_CONTACT, NO_INTERFACE
 
@@ -128,10 +129,16 @@ def test_the_interface_events_are_counted_slot_by_slot():
         "ends": 1,
         "births": 1,
         "reversals": 1,
+        "theta_ended": 0.1,  # the first slot's -theta where it ended
+        "theta_reversed": 0.2,  # the third's, where its slip changed sign
     }
     theta, slip = np.array([-0.1, -0.1, 0.0]), np.array([0.1 * v, -10.0 * v, 1.0])
     want = [law.mu0 - 0.1, law.mu0 - 0.1 + law.A * np.log(10.0), law.mu0 + law.A * np.log(1 / v)]
     assert np.allclose(events.live_mu(theta, slip, law), want, rtol=1e-14, atol=0)
+    # Under relaxing the interface is kept below v_star and mu is the paper's mu0 there.
+    relaxing = RateState(below_v_star="relaxing")
+    want[0] = law.mu0
+    assert np.allclose(events.live_mu(theta, slip, relaxing), want, rtol=1e-14, atol=0)
 
 
 def test_an_interface_s_life_is_counted_from_its_birth_to_its_end():

@@ -26,7 +26,7 @@ step by step, what the rule decides in a jam:
 ``--steps`` runs ``--span`` seconds, its contacts read after every step. A contact lives in
 one slot (its owner body's), so the rates are per contact; each step's fields are read
 through NumPy, so the finest step takes minutes. Writes ``interface_events.json`` and prints
-the table (docs/accuracy.md quotes it). ``--rule healing`` (or ``frozen``) runs the same
+the table (docs/accuracy.md quotes it). ``--rule healing`` (``frozen``, ``relaxing``) runs the same
 under that rule below v_star, from its own jam (the run to ``--t0`` under it too).
 """
 
@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 STEPS = (0.2, 0.1, 0.05, 0.025, 0.0125)  # dt / stable_dt
+RULES = ("paper", "healing", "frozen", "relaxing")  # codes.RestRule's labels
 
 
 def _jam_dt():
@@ -82,13 +83,20 @@ def count_step(before: dict, after: dict, v_star: float) -> dict:
     ``slip`` arrays of equal shape (the World's ``contact_*`` fields)."""
     m = _states(before, after)
     held, live0, live1 = m["held"], m["live0"], m["live1"]
+    ends = held & live0 & m["none1"]
+    reversals = held & live0 & live1 & (before["slip"] * after["slip"] < 0)
     return {
         "contact_steps": int(held.sum()),
         "stuck_steps": int((held & m["none1"]).sum()),
         "below_steps": int((held & (np.abs(after["slip"]) <= v_star)).sum()),
-        "ends": int((held & live0 & m["none1"]).sum()),
+        "ends": int(ends.sum()),
         "births": int(births(before, after).sum()),
-        "reversals": int((held & live0 & live1 & (before["slip"] * after["slip"] < 0)).sum()),
+        "reversals": int(reversals.sum()),
+        # How much memory the ends erase: -theta of each interface where it ended (the
+        # strength it gave back, in units of mu), and of each live interface whose slip
+        # reversed (erased under the paper's rule, kept under the others).
+        "theta_ended": float(-before["theta"][ends].sum()),
+        "theta_reversed": float(-before["theta"][reversals].sum()),
     }
 
 
@@ -129,9 +137,13 @@ def episode_summary(lengths: list[int], dt: float) -> dict:
 
 def live_mu(theta: np.ndarray, slip: np.ndarray, law) -> np.ndarray:
     """The friction coefficient of contacts with an interface (``rate_state_mu`` at their
-    slip rate, held at ``v_star`` from below, as the law takes it)."""
+    slip rate, held at ``v_star`` from below, as the law takes it; under ``relaxing``, mu0
+    below v_star, where the interface is kept)."""
     y = np.log(np.maximum(np.abs(slip), law.v_star) / law.v_star)
-    return np.maximum(law.mu0 + theta + law.A * y, 0.0)
+    mu = np.maximum(law.mu0 + theta + law.A * y, 0.0)
+    if law.below_v_star == "relaxing":
+        mu = np.where(np.abs(slip) < law.v_star, law.mu0, mu)
+    return mu
 
 
 def _fields(world) -> dict:
@@ -204,6 +216,15 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1, 
             "ends_per_s": totals["ends"] / seconds,
             "births_per_s": totals["births"] / seconds,
             "reversals_per_s": totals["reversals"] / seconds,
+            # -theta erased per contact-second (units of mu per s): what the ends do to the
+            # force, where their count is a count of events however small
+            "theta_ended_per_s": totals["theta_ended"] / seconds,
+            "theta_erased_per_s": (
+                totals["theta_ended"]
+                + (totals["theta_reversed"] if law.below_v_star == "paper" else 0.0)
+            )
+            / seconds,
+            "mean_theta_at_end": totals["theta_ended"] / max(totals["ends"], 1),
             "stuck_share": totals["stuck_steps"] / totals["contact_steps"],
             "below_share": totals["below_steps"] / totals["contact_steps"],
             "mu_live": mu_sum / max(mu_n, 1),
@@ -222,10 +243,10 @@ def run(layouts: int, t0: float, span: float, steps=STEPS, first_seed: int = 1, 
 
 def table(result: dict) -> str:
     rows = [
-        "| step (stable_dt) | steps | contact-s | ends /s | births /s | reversals /s | stuck "
-        "| mean mu, live | mean mu, all | interfaces born and ended | of 1 step | of <= 4 "
-        "| median life |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| step (stable_dt) | steps | contact-s | ends /s | births /s | reversals /s "
+        "| -theta erased /s | stuck | mean mu, live | mean mu, all | interfaces born and ended "
+        "| of 1 step | of <= 4 | median life |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for ratio, r in result["steps"].items():
         lived = "| 0 | - | - | - |"
@@ -236,7 +257,8 @@ def table(result: dict) -> str:
             )
         rows.append(
             f"| {ratio} | {r['n_steps']} | {r['contact_seconds']:.0f} | {r['ends_per_s']:.2f} | "
-            f"{r['births_per_s']:.2f} | {r['reversals_per_s']:.2f} | {r['stuck_share']:.3f} | "
+            f"{r['births_per_s']:.2f} | {r['reversals_per_s']:.2f} | "
+            f"{r['theta_erased_per_s']:.4f} | {r['stuck_share']:.3f} | "
             f"{r['mu_live']:.4f} | {r['mu_all']:.4f} " + lived
         )
     return "\n".join(rows)
@@ -250,7 +272,7 @@ def main(argv=None) -> int:
     parser.add_argument("--t0", type=float, default=15.0, help="s: where the branches start")
     parser.add_argument("--span", type=float, default=0.5, help="s each step runs")
     parser.add_argument(
-        "--rule", choices=("paper", "healing", "frozen"), help="the rule below v_star"
+        "--rule", choices=RULES, help="the rule below v_star"
     )
     parser.add_argument(
         "--steps", default=",".join(map(str, STEPS)), help="dt / stable_dt, comma-separated"

@@ -54,7 +54,13 @@ what does:
   fast slide through the reversal, and slide off under a load mu0 holds.)
 - ``healing``: theta keeps relaxing toward 0 over t_c and mu = max(mu0 + theta, 0): a
   contact that comes to rest after fast sliding is weak at first and heals;
-- ``frozen``: theta is held and mu = max(mu0 + theta, 0) until the contact slides again.
+- ``frozen``: theta is held and mu = max(mu0 + theta, 0) until the contact slides again;
+- ``relaxing``: mu = mu0 exactly, as under ``paper``, but the interface does not end (not
+  below v_star, not at a reversal): theta relaxes toward 0 over t_c as under ``healing``, and
+  when the contact slides faster than v_star again the law goes on from that theta. The
+  paper's rule decides the end of an interface on one step's slip, and a held contact's slip
+  hovers at v_star, so how often its interfaces end grows as the step shrinks
+  (``validation/interface_events.py``); this rule keeps the paper's mu and has no such event.
 
 A Coulomb world in a rate-and-state batch (``memory`` 0, A = B = 0) gets mu0 exactly.
 
@@ -138,6 +144,8 @@ def contact_friction(
     if not fresh and rule == RestRule.HEALING:
         theta_low = float(theta_step(theta, 0.0, 0.0, 0.0, dt, B, t_c, method))
         mu_low = max(mu0 + theta_low, 0.0)
+    elif not fresh and rule == RestRule.RELAXING:
+        theta_low = float(theta_step(theta, 0.0, 0.0, 0.0, dt, B, t_c, method))
     elif not fresh and rule == RestRule.FROZEN:
         theta_low = theta
         mu_low = max(mu0 + theta, 0.0)

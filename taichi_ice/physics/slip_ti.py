@@ -61,6 +61,8 @@ def contact_friction_ti(
     if not fresh and rule == RestRule.HEALING:
         theta_low = theta_step_ti(theta_in, 0.0, 0.0, 0.0, dt, B, t_c, method)
         mu_low = ti.max(mu0 + theta_low, 0.0)
+    elif not fresh and rule == RestRule.RELAXING:
+        theta_low = theta_step_ti(theta_in, 0.0, 0.0, 0.0, dt, B, t_c, method)
     elif not fresh and rule == RestRule.FROZEN:
         theta_low = theta_in
         mu_low = ti.max(mu0 + theta_in, 0.0)

@@ -1,8 +1,8 @@
-"""What a rate-and-state interface remembers when it stops: the three ``below_v_star`` rules.
+"""What a rate-and-state interface remembers when it stops: the ``below_v_star`` rules.
 
 One interface slides at 1 mm/s for 10 s, stops (V = 0 < v_star) for 5 s and slides again at
-1 mm/s; mu(t) under ``paper`` (default), ``healing`` and ``frozen`` (``codes.RestRule``), and
-the steady-state and memory-only variants, from ``RateState.respond`` (NumPy). Writes
+1 mm/s; mu(t) under ``paper`` (default), ``healing``, ``frozen`` and ``relaxing``
+(``codes.RestRule``), and the steady-state and memory-only variants, from ``RateState.respond`` (NumPy). Writes
 ``fig_rest_rules.png`` and ``rest_rules.json`` (mu just before the stop, while stopped, and
 just after the restart, per rule).
 """
@@ -78,6 +78,7 @@ def plot(c: dict[str, np.ndarray], path: Path) -> None:
         "paper": ("C0", "-", 2.2),
         "healing": ("C1", "-", 1.4),
         "frozen": ("C2", "--", 1.4),
+        "relaxing": ("C3", ":", 2.2),
         "steady-state": ("C7", ":", 1.4),
         "memory-only (paper)": ("C4", "-.", 1.2),
     }

@@ -40,8 +40,9 @@ from pathlib import Path
 
 import numpy as np
 
+from taichi_ice.codes import RestRule
+
 STEPS = (0.2, 0.1, 0.05, 0.025, 0.0125)  # dt / stable_dt
-RULES = ("paper", "healing", "frozen", "relaxing")  # codes.RestRule's labels
 
 
 def _jam_dt():
@@ -271,9 +272,7 @@ def main(argv=None) -> int:
     parser.add_argument("--first-seed", type=int, default=1, help="seed of the 2nd layout on")
     parser.add_argument("--t0", type=float, default=15.0, help="s: where the branches start")
     parser.add_argument("--span", type=float, default=0.5, help="s each step runs")
-    parser.add_argument(
-        "--rule", choices=RULES, help="the rule below v_star"
-    )
+    parser.add_argument("--rule", choices=RestRule.labels(), help="the rule below v_star")
     parser.add_argument(
         "--steps", default=",".join(map(str, STEPS)), help="dt / stable_dt, comma-separated"
     )

@@ -50,8 +50,9 @@ from pathlib import Path
 
 import numpy as np
 
+from taichi_ice.codes import RestRule
+
 STEPS = (0.2, 0.05)  # dt / stable_dt: the default and its quarter
-RULES = ("paper", "healing", "frozen", "relaxing")  # codes.RestRule's labels
 THRESHOLDS = (1e4, 1e5, 5e5, 1e6)  # N: the jam's onset and growth
 UNTIL = 20.0  # s: the paper's run
 BRANCH_END = 19.0  # s
@@ -178,7 +179,7 @@ def main(argv=None) -> int:
     parser.add_argument("--damping", type=float, default=0.35, help="raised [ice] damping")
     parser.add_argument(
         "--rule",
-        choices=RULES,
+        choices=RestRule.labels(),
         help="only the peak force at both steps with this rule below v_star (4.)",
     )
     parser.add_argument(

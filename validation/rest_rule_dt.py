@@ -2,10 +2,10 @@
 validation/rest_rule_dt.py --out DIR``.
 
 The pillar scene with the paper's rate-and-state law, once for each rule below v_star
-(``RateState.below_v_star``: ``paper``, ``healing``, ``frozen``, ``relaxing``) and with Coulomb mu = 0.9,
-at dt from 0.025 to 0.4 of the stable step; the frictional energy and the block positions
-at a few times before the runs part (~5.5 s), against the run at 0.025. Writes
-``rest_rule_dt.json`` and ``rest_rule_dt.png`` and prints the table (docs/accuracy.md
+(``RateState.below_v_star``: ``paper``, ``healing``, ``frozen``, ``relaxing``) and with
+Coulomb mu = 0.9, at dt from 0.025 to 0.4 of the stable step; the frictional energy and the
+block positions at a few times before the runs part (~5.5 s), against the run at 0.025.
+Writes ``rest_rule_dt.json`` and ``rest_rule_dt.png`` and prints the table (docs/accuracy.md
 quotes it). About 4 minutes on 2 cores.
 """
 
@@ -17,9 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from taichi_ice.codes import RestRule
+
 RATIOS = (0.025, 0.05, 0.1, 0.2, 0.4)
 TIMES = (2.5, 4.0, 5.5)
-RULES = ("paper", "healing", "frozen", "relaxing")
+RULES = RestRule.labels()
 
 
 def measure(scene, ratios=RATIOS, times=TIMES) -> dict:

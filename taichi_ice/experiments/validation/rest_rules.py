@@ -2,9 +2,9 @@
 
 One interface slides at 1 mm/s for 10 s, stops (V = 0 < v_star) for 5 s and slides again at
 1 mm/s; mu(t) under ``paper`` (default), ``healing``, ``frozen`` and ``relaxing``
-(``codes.RestRule``), and the steady-state and memory-only variants, from ``RateState.respond`` (NumPy). Writes
-``fig_rest_rules.png`` and ``rest_rules.json`` (mu just before the stop, while stopped, and
-just after the restart, per rule).
+(``codes.RestRule``), and the steady-state and memory-only variants, from
+``RateState.respond`` (NumPy). Writes ``fig_rest_rules.png`` and ``rest_rules.json`` (mu
+just before the stop, while stopped, and just after the restart, per rule).
 """
 
 from __future__ import annotations

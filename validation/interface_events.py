@@ -13,6 +13,9 @@ step by step, what the rule decides in a jam:
   touch, whose slot held ``NEW_CONTACT``);
 - ``reversals``: a live interface whose slip changed sign (under the paper's rule, ended and
   started again in one step; under the others it goes on);
+- ``theta_erased``: what the ends take, -theta of each interface where it ended (and, under
+  the paper's rule, where its slip reversed), per contact-second: the ends' effect on the
+  force, which converges where their count does not (``docs/accuracy.md``);
 - ``stuck``: the share of contact-steps with no interface (slip at or below ``v_star``);
 - ``mu_live``: the mean friction coefficient of the contacts with an interface, ``mu_all``
   of every held contact (mu0 without one);

@@ -113,8 +113,9 @@ def test_paper_rule_block_holds_at_0_8_and_slides_at_1_2(f64):
 
 def test_relaxing_rule_mu0_does_not_hold_a_contact_whose_kept_theta_is_weak(f64):
     """Under ``relaxing`` a contact that slid to a stop keeps its weak theta (healing over
-    t_c), and the paper's mu0 below v_star applies only where the law would slide slower
-    than v_star: the law at v_star, mu0 + theta, is the contact's strength. At 0.8 mu0 F,
+    t_c), and the paper's mu0 below v_star applies only while the contact slides slower
+    than v_star: loaded at about 10 v_star k_t (the ramp), its surfaces pass v_star and the
+    law at v_star, mu0 + theta, is the contact's strength. At 0.8 mu0 F,
     which the paper's rule holds (above), it slides off, and its acceleration is Newton's
     with the friction its contact gave, that friction the law's along its slip."""
     summary = dem_contact.hold_slide(rules=("relaxing",), loads=(0.8,))

@@ -167,8 +167,10 @@ def test_rules_below_v_star():
     f_trial = 0.6 * f_n
     assert solve(NO_INTERFACE, f_trial, f_n, K, rule=RestRule.PAPER)[2] == 0.0
     assert solve(theta, f_trial, f_n, K, rule=RestRule.FROZEN)[2] > V_STAR
-    # Relaxing: mu0 holds the stuck contact, though it kept theta = -0.5 (0.6 F_n < mu0 F_n).
+    # Relaxing: while its surfaces move slower than v_star, mu0 holds the stuck contact
+    # though it kept theta = -0.5 (0.6 F_n < mu0 F_n); moving faster, the weak law slides it.
     assert solve(theta, f_trial, f_n, K, slip=1e-6, rule=RestRule.RELAXING)[:3:2] == (MU0, 0.0)
+    assert solve(theta, f_trial, f_n, K, rule=RestRule.RELAXING)[2] > V_STAR
 
 
 def test_coulomb_row_slides_at_exactly_mu():

@@ -451,8 +451,9 @@ class RateState(_RateStateFamily):
     relaxes toward 0 over t_c as under ``healing`` and the interface slides on from there
     (the paper's words read in continuous time: a per-step end of the interface makes how
     often it ends depend on the step, ``docs/accuracy.md``). At a DEM contact mu0 applies
-    only where the law at the contact's theta would slide slower than v_star, so a stopped
-    contact holds (mu0 + theta) F_n, as under ``healing``: its jams carry as little.
+    only while the contact slides slower than v_star (its surfaces do, or the law at its
+    theta would), so a stopped contact loaded past that holds (mu0 + theta) F_n, as under
+    ``healing``: its jams carry as little.
 
     mu is clamped at 0: right after a fast deceleration from above ``v_star exp(mu0 / B)``
     (about 2.4 cm/s) the unclamped law would be negative.

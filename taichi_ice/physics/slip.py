@@ -61,10 +61,11 @@ what does:
   paper's rule decides the end of an interface on one step's slip, and a held contact's slip
   hovers at v_star, so how often its interfaces end grows as the step shrinks
   (``validation/interface_events.py``); this rule keeps the paper's mu and has no such event.
-  In force it is close to ``healing``: mu0 is taken only where the law at theta would not
-  slide past v_star (the branch ``contact_friction`` takes), so a stopped contact with a
-  weak theta holds (mu0 + theta) F_n, not mu0 F_n: the paper's stopped contacts are strong
-  by the end.
+  In force it is close to ``healing``: mu0 is taken only where the surfaces move slower
+  than v_star or the law at theta would not slide past it (the branch ``contact_friction``
+  takes), so a stopped contact with a weak theta, loaded fast enough to move its surfaces
+  past v_star, holds (mu0 + theta) F_n, not mu0 F_n: the paper's stopped contacts are
+  strong by the end.
 
 A Coulomb world in a rate-and-state batch (``memory`` 0, A = B = 0) gets mu0 exactly.
 

@@ -210,7 +210,8 @@ def _mu_at_rest(law: RateState, rule: str, theta: float) -> float:
     """What a stuck contact under ``rule`` with state ``theta`` holds, over F_n, to ``K
     v_star`` (slip.contact_friction): mu0 with no interface; the law's mu at v_star,
     ``max(mu0 + theta, 0)``, with one (under ``relaxing`` too, whose mu0 below v_star
-    applies only where the law's slip rate would be below v_star)."""
+    applies only while the contact slides slower than v_star: the load here moves its
+    surfaces faster)."""
     if rule == "paper" or theta > 0.5 * NO_INTERFACE:
         return law.mu0
     return max(law.mu0 + theta, 0.0)

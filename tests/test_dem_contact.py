@@ -17,6 +17,7 @@ import pytest
 from taichi_ice.experiments.validation import dem_contact
 from taichi_ice.experiments.validation.single_interface import profiles
 from taichi_ice.physics.friction import RateState
+from taichi_ice.physics.slip import NO_INTERFACE
 
 # The step profile of Figure 3, shortened (jump at 2 s, 8 s in all), at 20 ms steps.
 STEP_DT = 0.02
@@ -132,3 +133,38 @@ def test_relaxing_rule_mu0_does_not_hold_a_contact_whose_kept_theta_is_weak(f64)
         s["closed_form_acceleration"], rel=SLIDE_ACCELERATION_RTOL
     )
     assert s["max_abs_mu_contact_minus_law"] < SLIDE_MU_ATOL
+
+
+def test_paper_and_relaxing_share_a_batch_each_world_as_alone(f64):
+    """The rule below v_star is a world's data: the hold-and-slide block under ``paper`` and
+    under ``relaxing`` in one batch, slid to a stop and then pushed at 0.8 mu0 F, each moves
+    bit for bit as alone, contact theta included; and each got its own rule (the stop ends
+    the paper world's interface and keeps the relaxing world's, which slides off)."""
+    from taichi_ice.experiments.validation import contact_block, hold_slide
+
+    scenes = [hold_slide.block_scene(RateState(below_v_star=r)) for r in ("paper", "relaxing")]
+    push = (0.8 * RateState().mu0 * hold_slide.PRESS, -hold_slide.PRESS)
+
+    def run(worlds):
+        world = contact_block.make_world(worlds)
+        n = round(0.05 / world.dt)  # stopped by ~0.02 s
+        world.advance(n)
+        for s in world.world_slices():
+            world.model.body_force_ext[s.start + hold_slide.BLOCK] = push
+        world.advance(2 * n)
+        world.check()
+        theta = world.data.contact_theta.to_numpy()  # the bodies' contact slots
+        slices = world.world_slices()
+        return world.positions(), world.velocities(), [theta[s] for s in slices], slices
+
+    pos, vel, theta, slices = run(scenes)
+    for w, scene in enumerate(scenes):
+        p, v, (th,), _ = run([scene])
+        np.testing.assert_array_equal(p, pos[slices[w]])
+        np.testing.assert_array_equal(v, vel[slices[w]])
+        np.testing.assert_array_equal(th, theta[w])
+    block = hold_slide.BLOCK
+    assert theta[0][block, 0] > 0.5 * NO_INTERFACE  # the paper's stop ended the interface
+    assert theta[1][block, 0] < -0.5  # relaxing kept its weak theta
+    speeds = [abs(vel[s.start + block, 0]) for s in slices]
+    assert speeds[0] < 1e-4 < speeds[1]  # held; slid off

@@ -256,15 +256,20 @@ def test_relaxing_keeps_mu0_below_v_star_and_the_interface_through_the_stop():
     v = np.where((t > 10.0) & (t < 15.0), 0.0, 1e-3)
     x = math.log(1e-3 / V_STAR)
     stopped, again = (t > 10.0) & (t < 15.0), np.searchsorted(t, 15.0)
+    # The samples are 1 ms apart and the stop and restart fall within one (V linear between
+    # samples): theta's decay may start a sample off, a relative dt / t_c (measured 3.1e-4,
+    # every integrator), and the restart's first sample carries up to a sample's relaxation
+    # toward -B x, B x dt / t_c each way (measured 2.0e-4 on mu).
+    one_sample = (t[1] - t[0]) / T_C
     for method in ALL_METHODS:
         relaxing = RateState(below_v_star="relaxing")
         mu, theta = relaxing.respond(t, v, method=method, return_theta=True)
         assert np.all(mu[stopped] == MU0)
         late = stopped & (t > 10.5)
         expected = -B * x * np.exp(-(t[late] - 10.0) / T_C)
-        assert np.allclose(theta[late], expected, rtol=2e-3, atol=0)
+        assert np.allclose(theta[late], expected, rtol=one_sample, atol=0)
         peak = MU0 - B * x * math.exp(-5.0 / T_C) + A * x
-        assert mu[again] == pytest.approx(peak, abs=2e-3)
+        assert mu[again] == pytest.approx(peak, abs=2.0 * B * x * one_sample)
         assert mu[again] > MU0 + (A - B) * x + 0.05  # healed: stronger than the steady state
         healing = RateState(below_v_star="healing").respond(t, v, method=method)
         sliding = v > V_STAR

@@ -146,11 +146,10 @@ def contact_friction(
     start = 0.0 if fresh else theta
     # Below v_star.
     mu_low, theta_low = mu0, NO_INTERFACE
-    if not fresh and rule == RestRule.HEALING:
+    if not fresh and (rule == RestRule.HEALING or rule == RestRule.RELAXING):
         theta_low = float(theta_step(theta, 0.0, 0.0, 0.0, dt, B, t_c, method))
-        mu_low = max(mu0 + theta_low, 0.0)
-    elif not fresh and rule == RestRule.RELAXING:
-        theta_low = float(theta_step(theta, 0.0, 0.0, 0.0, dt, B, t_c, method))
+        if rule == RestRule.HEALING:  # relaxing keeps the paper's mu0
+            mu_low = max(mu0 + theta_low, 0.0)
     elif not fresh and rule == RestRule.FROZEN:
         theta_low = theta
         mu_low = max(mu0 + theta, 0.0)

@@ -58,11 +58,10 @@ def contact_friction_ti(
         start = 0.0
     mu_low = mu0
     theta_low = NO_INTERFACE
-    if not fresh and rule == RestRule.HEALING:
+    if not fresh and (rule == RestRule.HEALING or rule == RestRule.RELAXING):
         theta_low = theta_step_ti(theta_in, 0.0, 0.0, 0.0, dt, B, t_c, method)
-        mu_low = ti.max(mu0 + theta_low, 0.0)
-    elif not fresh and rule == RestRule.RELAXING:
-        theta_low = theta_step_ti(theta_in, 0.0, 0.0, 0.0, dt, B, t_c, method)
+        if rule == RestRule.HEALING:  # relaxing keeps the paper's mu0
+            mu_low = ti.max(mu0 + theta_low, 0.0)
     elif not fresh and rule == RestRule.FROZEN:
         theta_low = theta_in
         mu_low = ti.max(mu0 + theta_in, 0.0)

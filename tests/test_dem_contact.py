@@ -80,6 +80,16 @@ def test_step_through_the_contact_matches_the_exact_response(f64):
     assert entry["block_drift_speed"] < 1e-15
 
 
+def assert_slide_is_newtons(s: dict) -> None:
+    """A block that slid off: its mean acceleration is Newton's, (load - mu_contact F) / m,
+    with the friction its contact gave, and that friction is the law's along its slip."""
+    assert s["acceleration"] > 0.0
+    assert s["acceleration"] == pytest.approx(
+        s["closed_form_acceleration"], rel=SLIDE_ACCELERATION_RTOL
+    )
+    assert s["max_abs_mu_contact_minus_law"] < SLIDE_MU_ATOL
+
+
 def test_paper_rule_block_holds_at_0_8_and_slides_at_1_2(f64):
     """After sliding to a stop, a stuck contact holds mu0 F_n: 0.8 mu0 F holds, 1.2 slides
     at the acceleration its contact's friction leaves."""
@@ -104,12 +114,7 @@ def test_paper_rule_block_holds_at_0_8_and_slides_at_1_2(f64):
     assert not slide["held"] and slide["interface_under_load"]
     assert slide["max_contact_slip_m"] > 10 * setup["held_if_contact_slips_less_than_m"]
     assert slide["final_speed_m_s"] > slide["slide"]["speed_range_m_s"][0] > 0.0
-    s = slide["slide"]
-    assert s["acceleration"] > 0.0
-    assert s["acceleration"] == pytest.approx(
-        s["closed_form_acceleration"], rel=SLIDE_ACCELERATION_RTOL
-    )
-    assert s["max_abs_mu_contact_minus_law"] < SLIDE_MU_ATOL
+    assert_slide_is_newtons(slide["slide"])
 
 
 def test_relaxing_rule_mu0_does_not_hold_a_contact_whose_kept_theta_is_weak(f64):
@@ -127,12 +132,7 @@ def test_relaxing_rule_mu0_does_not_hold_a_contact_whose_kept_theta_is_weak(f64)
     assert theta is not None and law.mu0 + theta < 0.8 * law.mu0  # kept, and weak
     assert case["mu_at_load"] == pytest.approx(law.mu0 + theta, abs=1e-12)
     assert not case["held"] and case["interface_under_load"]
-    s = case["slide"]
-    assert s["acceleration"] > 0.0
-    assert s["acceleration"] == pytest.approx(
-        s["closed_form_acceleration"], rel=SLIDE_ACCELERATION_RTOL
-    )
-    assert s["max_abs_mu_contact_minus_law"] < SLIDE_MU_ATOL
+    assert_slide_is_newtons(case["slide"])
 
 
 def test_paper_and_relaxing_share_a_batch_each_world_as_alone(f64):

@@ -31,7 +31,9 @@ What the lane holds and why (the CPU suite runs all of it too):
 - ``test_engine.py``, ``test_budget.py``: stepping, conservation, the energy budget;
 - ``test_resume.py`` (float64): checkpoints and resume, bit for bit on the same arch;
 - ``test_forcing.py``: current, wind, Coriolis and tilt in the step against closed forms, a
-  root finder and their NumPy twins, gridded against uniform bit for bit.
+  root finder and their NumPy twins, gridded against uniform bit for bit;
+- ``test_transfer.py``: the kernels that start, checkpoint and resume a World's fields in
+  one launch against Taichi's own ``from_numpy`` and ``to_numpy``.
 """
 
 from __future__ import annotations
@@ -60,6 +62,7 @@ LANE = {
         "tests/test_budget.py",
         "tests/test_resume.py",
         "tests/test_forcing.py",
+        "tests/test_transfer.py",
     ],
     "f32": [
         "tests/test_gpu.py",
@@ -70,6 +73,7 @@ LANE = {
         "tests/test_friction.py",
         "tests/test_engine.py",
         "tests/test_forcing.py",
+        "tests/test_transfer.py",
     ],
 }
 

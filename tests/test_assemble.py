@@ -78,7 +78,6 @@ def test_worlds_with_other_ice_values_share_a_layout(pushed):
     alone = assemble([other])
     assert batch.layout == alone.layout.replace(
         n_bodies=batch.layout.n_bodies,
-        n_worlds=2,
         n_probes=batch.layout.n_probes,
         n_small=batch.layout.n_small,
         n_large=batch.layout.n_large,
@@ -169,9 +168,9 @@ def test_the_sizes_compiled_are_capacities_and_the_host_arrays_the_scenes_counts
     scene = load_scenario(ROOT / "scenarios" / "two_squares.toml")
     batch = assemble([scene, scene, scene])
     assert (batch.n_bodies, batch.real.n_worlds, batch.n_probes) == (6, 3, 3)
-    assert (batch.layout.n_bodies, batch.layout.n_worlds, batch.layout.n_probes) == (8, 4, 4)
+    assert (batch.layout.n_bodies, batch.layout.n_worlds, batch.layout.n_probes) == (8, 8, 4)
     assert batch.layout.max_verts == 4 and batch.host.body_mass.shape == (6,)
     edges = padded(batch.host.world_body_start, var("world_body_start"), batch.layout)
-    assert edges.tolist() == [0, 2, 4, 6, 6]
+    assert edges.tolist() == [0, 2, 4, 6, 6, 6, 6, 6, 6]
     mass = padded(batch.host.body_mass, var("body_mass"), batch.layout)
     assert mass.tolist() == [*batch.host.body_mass.tolist(), 0.0, 0.0]

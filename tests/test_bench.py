@@ -12,7 +12,7 @@ import pytest
 import shapely
 from shapely.geometry import Polygon
 
-from taichi_ice.codes import BodyEnergy, BodyKind
+from taichi_ice.codes import BodyEnergy, BodyKind, EnergyTerm
 from taichi_ice.commands import bench as cli_bench
 from taichi_ice.commands.cli import main
 from taichi_ice.experiments import bench
@@ -108,7 +108,11 @@ def test_cli_writes_csv_json_and_chart(tmp_path):
     # The budget's columns but the forcing's (a scene without current or wind allocates
     # none of those: codes.BodyEnergy.WIND onwards).
     per_body = (int(BodyEnergy.WIND) + slots + 3) * 8
-    assert extra == pytest.approx(bodies_per_block * per_body, rel=0.01)
+    # And each world's energy table (float64, a column per codes.EnergyTerm), for every world
+    # the fields allocate (8 at least), where without the budget it is one unused element.
+    worlds = record["runs"][0]["layout"]["n_worlds"]
+    per_block_tables = (worlds * len(EnergyTerm) - 1) * 8 / int(row["blocks"])
+    assert extra == pytest.approx(bodies_per_block * per_body + per_block_tables, rel=0.01)
 
 
 def test_random_box_is_as_dense_as_asked_and_nothing_overlaps():

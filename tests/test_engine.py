@@ -809,18 +809,26 @@ def test_batched_worlds_match_each_world_alone_bit_for_bit(f64, stepping, integr
     # The lists were rebuilt on the way (they record where): some launch stopped early.
     ref = batch.neighbours.nbr_ref_pos.to_numpy()[: batch.batch.n_bodies]
     assert np.max(np.hypot(*(ref - start).T)) > 0.5 * float(batch.host.list_skin)
+    batched = [world_state(batch, w) for w in range(len(scenes))]
+    layout = batch.layout
+    del batch  # a world alone has its layout (8 worlds at least): it takes its kernels
     for w, scene in enumerate(scenes):
         alone = World([scene], dt=dt, stepping=stepping, integrator=integrator)
+        assert alone.layout == layout
         alone.advance(400)
-        sl = batch.world_slices()[w]
-        assert alone.contact_counts()[0] == batch.contact_counts()[w]
-        np.testing.assert_array_equal(alone.positions(), batch.positions()[sl])
-        np.testing.assert_array_equal(alone.velocities(), batch.velocities()[sl])
-        np.testing.assert_array_equal(alone.angles(), batch.angles()[sl])
-        np.testing.assert_array_equal(alone.omegas(), batch.omegas()[sl])
-        # Energy terms are summed in float in candidate order: ascending ids, in any batch.
-        np.testing.assert_array_equal(alone.energies()[0], batch.energies()[w])
+        for name, values in world_state(alone, 0).items():
+            # Energy terms are summed in float in candidate order: ascending ids, in any batch.
+            np.testing.assert_array_equal(values, batched[w][name], err_msg=name)
         del alone  # its fields and kernels serve the next World of its layout
+
+
+def world_state(world: World, w: int) -> dict:
+    """World ``w`` of ``world``: its bodies' motion, its contacts and its energy table."""
+    sl = world.world_slices()[w]
+    out = {get: getattr(world, get)()[sl] for get in MOTION if get != "contact_counts"}
+    out["contacts"] = world.contact_counts()[w]
+    out["energies"] = world.energies()[w]
+    return out
 
 
 def with_ice(scene, **ice):
@@ -843,18 +851,18 @@ def test_a_world_with_its_slide_in_sub_steps_is_the_same_alone_and_in_a_batch(f6
     batch = World(scenes, dt=dt, stepping=stepping)
     batch.advance(400)
     batch.check()
+    batched = [world_state(batch, w) for w in range(len(scenes))]
+    assert batch.energies()[0][EnergyTerm.FRICTION] > 0  # it slid
+    del batch  # a world alone has its layout: it takes its kernels
     for w, scene in enumerate(scenes):
         alone = World([scene], dt=dt, stepping=stepping)
         alone.advance(400)
-        sl = batch.world_slices()[w]
-        np.testing.assert_array_equal(alone.positions(), batch.positions()[sl])
-        np.testing.assert_array_equal(alone.velocities(), batch.velocities()[sl])
-        np.testing.assert_array_equal(alone.energies()[0], batch.energies()[w])
+        for name, values in world_state(alone, 0).items():
+            np.testing.assert_array_equal(values, batched[w][name], err_msg=name)
         del alone  # its fields and kernels serve the next World of its layout
-    assert batch.energies()[0][EnergyTerm.FRICTION] > 0  # it slid
     one_step = World([with_ice(plain[0], slide_resolution=0.0)], dt=dt, stepping=stepping)
     one_step.advance(400)
-    assert not np.array_equal(one_step.positions(), batch.positions()[batch.world_slices()[0]])
+    assert not np.array_equal(one_step.positions(), batched[0]["positions"])
 
 
 @pytest.mark.parametrize("stepping", ["worlds", "bodies"])
@@ -878,24 +886,25 @@ def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
     steps = round(0.02 / dt)
     batch.advance(steps)
     batch.check()
+    batched = [world_state(batch, w) for w in range(2)]
+    layout = batch.layout
+    del batch  # a world alone has its layout: it takes its kernels
     for w, scene in enumerate((soft, stiff)):
         one = World([scene], dt=dt, stepping=stepping)
-        # The batch's counts are within the lone world's capacities (8 bodies, 4 probes):
-        # the same layout but for the number of worlds.
-        assert one.layout.replace(n_worlds=2) == batch.layout
+        # The batch's counts are within the lone world's capacities (8 bodies, 4 probes,
+        # 8 worlds): the same layout.
+        assert one.layout == layout
         one.advance(steps)
         one.check()
-        sl = batch.world_slices()[w]
-        np.testing.assert_array_equal(one.positions(), batch.positions()[sl])
-        np.testing.assert_array_equal(one.velocities(), batch.velocities()[sl])
-        np.testing.assert_array_equal(one.energies()[0], batch.energies()[w])
+        for name, values in world_state(one, 0).items():
+            np.testing.assert_array_equal(values, batched[w][name], err_msg=name)
         del one  # its fields and kernels serve the next World of its layout
     m_eff = float(soft.masses[0]) / 2.0
     for w, scene in enumerate((soft, stiff)):
         _, restitution = clamped_oscillator(
             scene.ice.contact_stiffness, scene.ice.contact_viscosity, m_eff, 1.0
         )
-        v = batch.velocities()[batch.world_slices()[w]]
+        v = batched[w]["velocities"]
         assert (v[1, 0] - v[0, 0]) == pytest.approx(restitution, rel=0.02), scene.ice
     durations = [
         clamped_oscillator(s.ice.contact_stiffness, s.ice.contact_viscosity, m_eff, 1.0)[0]

@@ -48,8 +48,9 @@ def test_the_time_step_is_decided_once_against_the_stability_limit():
 
 
 def _fields(world) -> dict:
-    holders = (world.model, world.data, world.hash, world.neighbours)
-    return {name: getattr(h, name).to_numpy() for h in holders for name in h.names}
+    """Every declared field of a World, as arrays (read in one launch: ``Transfer.read``,
+    held to ``to_numpy`` by tests/test_transfer.py)."""
+    return world.transfer.read()
 
 
 def _step_alike(reused, new, steps: int) -> dict:

@@ -80,15 +80,15 @@ def test_allocated_fields_have_their_declared_shape_and_type(world):
 
 
 def test_uploaded_host_arrays_read_back_unchanged(world):
-    """state.upload copies every host array into its field, cast to the field's type (f64:
-    bit for bit)."""
+    """A World starts with every host array in its field (``World._start``), cast to the
+    field's type (f64: bit for bit)."""
     for v in schema.host_vars():
         if not world.layout.exists(v):
             continue
         holder = world.model if hasattr(world.model, v.name) else world.data
         got = getattr(holder, v.name).to_numpy()
         want = world.host[v.name]
-        want = want.astype(got.dtype)  # what upload casts to: a float32 run's reals
+        want = want.astype(got.dtype)  # the field's type: a float32 run's reals
         if want.ndim == 0:  # a scalar field
             np.testing.assert_array_equal(got, want, err_msg=v.name)
             continue
@@ -121,7 +121,9 @@ def test_traffic_model_counts_the_integrator_by_hand():
     minus the model, plus the body's velocity change, rotation and path, the status and the
     stale flags."""
     batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
-    layout = batch.layout.replace(n_bodies=1000, n_probes=0, water=False, force_ext=True)
+    layout = batch.layout.replace(
+        n_bodies=1000, n_worlds=1, n_probes=0, water=False, force_ext=True
+    )
     n = layout.n_bodies
     # reads: probe, kind (i32); force_ext (2 x f64); inv_mass, inv_inertia (f64); force_q
     # (2 x i64), torque_q (i64); vel (2 x f64), omega, pos (2 x f64), angle (f64); energy

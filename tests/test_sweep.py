@@ -241,9 +241,9 @@ def test_the_example_sweep_is_valid():
 
 
 def _fields(world) -> dict:
-    """Every declared field of a World, as arrays."""
-    holders = (world.model, world.data, world.hash, world.neighbours)
-    return {name: getattr(h, name).to_numpy() for h in holders for name in h.names}
+    """Every declared field of a World, as arrays (read in one launch: ``Transfer.read``,
+    held to ``to_numpy`` by tests/test_transfer.py)."""
+    return world.transfer.read()
 
 
 def test_a_reloaded_world_steps_bit_for_bit_as_a_new_one():
@@ -270,9 +270,10 @@ def test_a_reloaded_world_steps_bit_for_bit_as_a_new_one():
     assert reused.contact_counts().tolist() == [1, 1]  # sliding: memory to forget
     on_the_floor = reused.positions(), reused.angles()
 
-    # Three worlds take a capacity of four (assemble.capacity): another layout.
-    with pytest.raises(UsageError, match="n_worlds 2 here, 4 for the scenes"):
-        reused.reload([*second, *first[:1]])
+    # Nine worlds take a capacity of 16, past the floor of 8 (assemble.capacity): another
+    # layout.
+    with pytest.raises(UsageError, match="n_worlds 8 here, 16 for the scenes"):
+        reused.reload([*second * 4, *first[:1]])
     reused.reload(second)
     assert reused.steps == 0 and reused.time == 0.0
     fresh = World(second)

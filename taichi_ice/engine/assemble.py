@@ -59,11 +59,16 @@ MAX_VERTS_LIMIT = MAX_VERTICES
 # process). Powers of two up to CAPACITY_POW2_MAX (memory is no concern there), then steps
 # of an eighth to a sixteenth of the count (at most 12.5 % of rows unused at 1e4 bodies and
 # up). The rows past the scenes' are never read: the kernels loop over ``body_count``.
+# Worlds take a floor of 8: a world alone and a batch of up to 8 share one layout, and so
+# one set of compiled kernels (a World of one and then of a batch in one process, as tests,
+# ensembles and a user's first runs do, compiled twice with a floor of 1). A world past the
+# scenes' has no bodies: its thread (thread-per-world stepping) and its rows of the
+# per-world loops find nothing to do.
 CAPACITY_POW2_MAX = 4096
 CAPACITY_FLOORS = {
     "n_bodies": 8,
     "n_local_verts": 32,
-    "n_worlds": 1,
+    "n_worlds": 8,
     "n_probes": 4,
     "n_small": 8,
     "n_large": 4,
@@ -107,7 +112,7 @@ class Batch:
         real: the layout with the scenes' own counts (bodies, worlds, probes, ...): the
             shapes of ``host`` and of what readers return.
         host: the arrays of every ``HOST`` field (``schema.HostArrays``), of the scenes'
-            counts (``state.upload`` pads them to the capacities).
+            counts (``state.start_arrays`` pads them to the capacities).
         dt: the time step (s). stable_dt: the contact stability limit (s), over every world.
         default_slots: the contact slots per body these scenes get when none are asked for
             (``layout.slots`` unless ``Options.slots`` set them).

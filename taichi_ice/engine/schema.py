@@ -2,7 +2,7 @@
 
 Everything else is derived from the tables below: the Taichi fields of ``state.Model``,
 ``state.Data`` and the broad phase's scratch (``state.allocate``), the NumPy arrays that
-``assemble`` builds and ``state.upload`` copies in (``HOST``), the field table in
+``assemble`` builds and ``World._start`` copies in (``HOST``; ``state.start_arrays``), the field table in
 ``docs/state.md`` (``markdown_table``; ``python -m taichi_ice.engine.schema`` writes it), and the
 benchmark's traffic model (``stages.traffic``), which charges each stage for the fields it
 declares it reads and writes (``stages.Stage``, in its own module with the check of those
@@ -86,7 +86,7 @@ class Var:
             terms, overlap areas).
         when: a ``Layout`` switch that must be true for the field to exist (``"rate_state"``,
             ``"water"``); otherwise a placeholder of one element keeps kernels uniform.
-        init: ``HOST`` (built by ``assemble``, uploaded by ``state.upload``) or a fill value.
+        init: ``HOST`` (built by ``assemble``, copied in by ``World._start``) or a fill value.
     """
 
     name: str
@@ -503,7 +503,7 @@ def field_bytes(layout: Layout) -> dict[str, int]:
 class HostArrays(Mapping):
     """The NumPy side of a batch before upload: one array per ``HOST`` field, checked.
 
-    Built by ``assemble``; read by ``state.upload`` and by the NumPy reference
+    Built by ``assemble``; read by ``state.start_arrays`` and by the NumPy reference
     (``reference.ReferenceModel``), so both start from the same numbers. Access by name as a
     mapping or an attribute (``host.body_mass``).
 

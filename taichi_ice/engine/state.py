@@ -8,7 +8,7 @@ different worlds.
 Every field is declared once, in ``taichi_ice.engine.schema`` (name, type, shape, unit, meaning;
 ``docs/state.md`` is its table); this module only turns those declarations into Taichi fields
 (``Model``: static after set-up; ``Data``: mutable; ``Fields`` for a stage's scratch) and
-copies the assembled NumPy arrays in (``upload``).
+lists what each holds before the first step (``start_arrays``).
 """
 
 from __future__ import annotations
@@ -138,19 +138,21 @@ def padded(array: np.ndarray, v: Var, layout: Layout) -> np.ndarray:
     return np.pad(array, widths)
 
 
-def upload(model: Model, data: Data, host: HostArrays) -> None:
-    """Copy every assembled array into its field, cast to the field's type, padded to the
-    field's capacity (``padded``)."""
-    layout = model.layout
-    for v in schema.host_vars():
-        if not layout.exists(v):
-            continue
-        group = model if hasattr(model, v.name) else data
-        array = np.ascontiguousarray(host[v.name], dtype=v.np_dtype(layout.precision))
-        if not v.shape:  # a scalar field
-            getattr(group, v.name)[None] = array.item()
-        else:
-            getattr(group, v.name).from_numpy(np.ascontiguousarray(padded(array, v, layout)))
+def start_arrays(layout: Layout, host: HostArrays) -> dict[str, np.ndarray]:
+    """What every declared field (``schema.groups()``) holds before the first step, by name:
+    the assembled array of a ``HOST`` field, cast to the field's type and padded to its
+    capacity (``padded``); the declared ``init`` value everywhere else (and in a switched-off
+    ``HOST`` field, which no kernel reads). ``transfer.Transfer.write`` puts them in at once."""
+    out = {}
+    for group in schema.groups().values():
+        for v in group:
+            shape = schema.allocated_shape(layout, v) + ((v.lanes,) if v.lanes > 1 else ())
+            if v.init == schema.HOST and layout.exists(v):
+                array = np.asarray(host[v.name], dtype=v.np_dtype(layout.precision))
+                out[v.name] = array if not v.shape else padded(array, v, layout)
+            else:
+                out[v.name] = np.full(shape, 0 if v.init == schema.HOST else v.init)
+    return out
 
 
-__all__ = ["Data", "Fields", "Model", "make_field", "padded", "ti_dtype", "upload"]
+__all__ = ["Data", "Fields", "Model", "make_field", "padded", "start_arrays", "ti_dtype"]

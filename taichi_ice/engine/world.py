@@ -44,6 +44,7 @@ from .energy import SAMPLE_COLUMNS, EnergyMeter
 from .integrate import Integrator
 from .options import Options, options_of
 from .stepper import NO_SAMPLE, BodyTeam, WorldStepper
+from .transfer import Transfer
 
 # The stages of a step, by the name their kernels are reported under (benchmarks, traffic).
 STAGES = {
@@ -163,13 +164,12 @@ class World:
         key = (self.layout, stepping, threads, backend.generation())
         self.engine_key = key
         parts = ENGINES.take(key)
-        reused = parts is not None
         if parts is None:
             parts = self._build(threads)
         for name, part in parts.items():
             setattr(self, name, part)
-        if reused:  # fields of a World gone: every one back to its start, these scenes in
-            self._start()
+        # Every field to its start, these scenes in: new fields, or those of a World gone.
+        self._start()
         # When this World is gone, its fields and compiled kernels serve the next World of
         # its layout (``Engines``).
         weakref.finalize(self, ENGINES.give_back, key, parts)
@@ -184,8 +184,8 @@ class World:
         ti.sync()
 
     def _build(self, threads: int | None) -> dict:
-        """New fields for this World's layout, the scenes uploaded, and the stages whose
-        kernels close over them (compiled at their first launch)."""
+        """New fields for this World's layout and the stages whose kernels close over them
+        (compiled at their first launch); ``_start`` puts the scenes in."""
         limit = backend.field_tree_limit()
         if limit is not None and backend.field_trees() + TREES_PER_WORLD > limit:
             raise UsageError(
@@ -196,13 +196,18 @@ class World:
             )
         layout = self.layout
         model, data = state.Model(layout), state.Data(layout)
-        state.upload(model, data, self.host)
-        data.time_step[None] = self.dt
         hash_ = SpatialHash(layout, model, data)
         neighbours = NeighbourList(layout)
+        # Every declared field, written at once (``World._start``).
+        declared = {n: getattr(g, n) for g in (model, data, hash_, neighbours) for n in g.names}
+        unheld = {v.name for g in schema.groups().values() for v in g} - set(declared)
+        if unheld:
+            raise RuntimeError(
+                f"World: fields {sorted(unheld)} are declared in taichi_ice.engine.schema but "
+                "held by no group of the World; it cannot start them"
+            )
         contacts = ContactStage(layout, model, data, hash_, neighbours)
         integrator = Integrator(layout, model, data, neighbours)
-        integrator.orient()
         energy = EnergyMeter(layout, model, data)
         stepper = WorldStepper(layout, model, data, neighbours, contacts, integrator, energy)
         team = None
@@ -218,6 +223,7 @@ class World:
             "energy": energy,
             "stepper": stepper,
             "team": team,
+            "transfer": Transfer(declared),
             # What this World's kernels ran ("advance", "sampled"): those are compiled, for
             # the next World on these fields too (``compiled``).
             "launched": set(),
@@ -267,34 +273,14 @@ class World:
         self.time = 0.0
 
     def _start(self) -> None:
-        """Every field to its declared start (``schema.groups()``: a fill with ``Var.init``,
-        then the assembled ``HOST`` arrays), dt set, the outlines turned and the neighbour
-        lists marked stale: the fields of a new World of these scenes."""
-        fields = self._declared_fields()
-        for group in schema.groups().values():
-            for v in group:
-                if v.init != schema.HOST:
-                    fields[v.name].fill(v.init)
-        state.upload(self.model, self.data, self.host)
-        self.data.time_step[None] = self.dt
+        """Every field to its declared start (``state.start_arrays``: ``Var.init``, the
+        assembled ``HOST`` arrays; among them the neighbour lists marked stale) in one launch
+        (``transfer.Transfer``), dt set, the outlines turned: the fields of a new World of
+        these scenes, whether the fields are new or a World's gone."""
+        arrays = state.start_arrays(self.layout, self.host)
+        arrays["time_step"] = np.asarray(self.dt)
+        self.transfer.write(arrays)
         self.integrator.orient()
-        self.neighbours.world_nbr_stale.fill(1)
-        self.neighbours.nbr_rebuild[None] = 1
-
-    def _declared_fields(self) -> dict:
-        """Every field declared in ``schema.groups()``, by name, from the groups of fields
-        this World holds (model, data, the hash's, the neighbour lists')."""
-        holders = [v for v in vars(self).values() if isinstance(v, state.Fields)]
-        found = {name: getattr(h, name) for h in holders for name in h.names}
-        declared = [v.name for g in schema.groups().values() for v in g]
-        missing = [name for name in declared if name not in found]
-        if missing:
-            raise RuntimeError(
-                f"World.reload: fields {missing} are declared in taichi_ice.engine.schema but "
-                "held by "
-                "no group of the World; reload cannot reset them"
-            )
-        return found
 
     # ----------------------------------------------------------------------------------------
     # The step

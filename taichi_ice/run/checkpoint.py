@@ -62,11 +62,6 @@ def path_for(run_path: str | Path) -> Path:
     return Path(f"{run_path}{SUFFIX}")
 
 
-def _fields(container) -> dict:
-    """``{name: Taichi field}`` of a ``state.Fields`` group."""
-    return {name: getattr(container, name) for name in container.names}
-
-
 def identity(sim) -> dict:
     """What a resumed run must share with the run it continues (JSON-able)."""
     return {
@@ -92,9 +87,10 @@ def _grid_digests(scene) -> list[str]:
 
 def state(world) -> dict:
     """``{group: {name: array}}``: every field a run's state is, read back (what a checkpoint
-    holds and ``put_state`` puts back)."""
+    holds and ``put_state`` puts back), in one launch (``World.transfer``)."""
+    arrays = world.transfer.read()
     return {
-        group: {name: field.to_numpy() for name, field in _fields(container).items()}
+        group: {name: arrays[name] for name in container.names}
         for group, container in (("data", world.data), ("nbr", world.neighbours))
     }
 
@@ -106,25 +102,25 @@ def put_state(sim, arrays: dict, steps: int, initial_energy, where: str | Path) 
         RunFileError: the arrays are not this World's fields (``where`` names their source).
     """
     world = sim.world
+    current = world.transfer.read()  # the fields a checkpoint does not hold stay as they are
+    shapes = world.transfer.shapes()
     for group, container in (("data", world.data), ("nbr", world.neighbours)):
-        fields = _fields(container)
+        names = set(container.names)
         saved = arrays[group]
-        if set(saved) != set(fields):
+        if set(saved) != names:
             raise RunFileError(
-                f"{where}: the checkpoint's state ({sorted(set(saved) ^ set(fields))} differ) "
+                f"{where}: the checkpoint's state ({sorted(set(saved) ^ names)} differ) "
                 "is of another version of taichi-ice; start anew with --overwrite"
             )
-        for name, field in fields.items():
+        for name in container.names:
             array = np.asarray(saved[name])
-            if tuple(array.shape) != tuple(field.to_numpy().shape):
+            if tuple(array.shape) != shapes[name]:
                 raise RunFileError(
                     f"{where}: field {name} has shape {array.shape} in the checkpoint; this "
                     "run's is other: start anew with --overwrite"
                 )
-            if tuple(field.shape) == ():  # a scalar field reads back as (1,)
-                field[None] = array.reshape(-1)[0].item()
-            else:
-                field.from_numpy(np.ascontiguousarray(array))
+            current[name] = array
+    world.transfer.write(current)
     sim.initial_energy = np.asarray(initial_energy).copy()
     world.steps = int(steps)
     world.time = world.steps * world.dt

@@ -1,0 +1,121 @@
+"""``engine.transfer.Transfer`` against Taichi's own ``from_numpy`` and ``to_numpy``.
+
+Fields of every supported type and shape (0-d, one and two axes, scalars and vectors),
+seeded random values: what one launch writes is what ``to_numpy`` reads back, bit for bit,
+and what it reads is what ``from_numpy`` put in. And a World's fields hold, before the first
+step, what ``state.start_arrays`` says (read field by field with ``to_numpy``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from taichi_ice import load_scenario
+from taichi_ice.engine import schema
+from taichi_ice.engine.state import start_arrays
+from taichi_ice.engine.transfer import Transfer
+from taichi_ice.engine.world import World
+
+NUMPY = {ti.f64: np.float64, ti.f32: np.float32, ti.i32: np.int32, ti.i64: np.int64}
+# (type, shape, lanes: 0 a scalar field): every case the kernel's loops distinguish.
+SPECS = [
+    (ti.f64, (7,), 0),
+    (ti.f32, (5, 3), 0),
+    (ti.i32, (9,), 0),
+    (ti.i64, (4,), 2),
+    (ti.f64, (), 0),
+    (ti.i32, (), 0),
+    (ti.f64, (6,), 2),
+    (ti.f32, (3, 2), 12),
+    (ti.f64, (), 2),
+    (ti.i64, (2, 5), 0),
+]
+
+
+def make_fields() -> dict:
+    return {
+        f"f{k}": ti.Vector.field(lanes, dtype, shape=shape) if lanes else ti.field(dtype, shape)
+        for k, (dtype, shape, lanes) in enumerate(SPECS * 2)
+    }
+
+
+def random_arrays(fields: dict, seed: int) -> dict:
+    """Values that use each type's range: large and signed integers, floats of any exponent."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for name, field in fields.items():
+        shape = field.shape + ((field.n,) if isinstance(field, ti.MatrixField) else ())
+        kind = NUMPY[field.dtype]
+        if np.issubdtype(kind, np.integer):
+            info = np.iinfo(kind)
+            out[name] = rng.integers(info.min, info.max, size=shape, dtype=kind, endpoint=True)
+        else:
+            out[name] = (rng.normal(size=shape) * 10.0 ** rng.integers(-30, 30, size=shape)).astype(
+                kind
+            )
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_write_then_to_numpy_and_from_numpy_then_read_give_the_arrays_bit_for_bit(seed):
+    fields = make_fields()
+    transfer = Transfer(fields)
+    arrays = random_arrays(fields, seed)
+    transfer.write(arrays)
+    for name, field in fields.items():
+        got = field.to_numpy()
+        assert got.dtype == arrays[name].dtype and got.shape == arrays[name].shape, name
+        np.testing.assert_array_equal(got, arrays[name], err_msg=name)
+    other = random_arrays(fields, seed + 100)
+    for name, field in fields.items():
+        if field.shape == ():  # Taichi's from_numpy takes no 0-d array
+            value = other[name]
+            field[None] = value.tolist() if value.ndim else value.item()
+        else:
+            field.from_numpy(other[name])
+    read = transfer.read()
+    assert set(read) == set(fields)
+    for name in fields:
+        assert read[name].dtype == other[name].dtype, name
+        np.testing.assert_array_equal(read[name], other[name], err_msg=name)
+
+
+def test_a_missing_or_misshapen_array_is_refused_naming_the_field():
+    fields = make_fields()
+    transfer = Transfer(fields)
+    arrays = random_arrays(fields, 3)
+    arrays["f1"] = arrays["f1"][:2]
+    with pytest.raises(ValueError, match=r"f1 has shape \(2, 3\), its field \(5, 3\)"):
+        transfer.write(arrays)
+    del arrays["f1"]
+    with pytest.raises(ValueError, match=r"no array for \['f1'\]"):
+        transfer.write(arrays)
+
+
+def test_a_world_starts_with_the_declared_values_in_every_field(taichi_runtime):
+    """Every declared field of a new World, read with ``to_numpy``, holds ``start_arrays``
+    (the host arrays padded, the declared init elsewhere), but the time step, which is dt,
+    and the bodies' rotations, which ``Integrator.orient`` computes from their angles."""
+    scene = load_scenario("scenarios/two_squares.toml")
+    world = World([scene, scene])
+    want = start_arrays(world.layout, world.host)
+    holders = (world.model, world.data, world.hash, world.neighbours)
+    got = {name: getattr(h, name).to_numpy() for h in holders for name in h.names}
+    declared = {v.name for g in schema.groups().values() for v in g}
+    assert set(got) == declared == set(want)
+    for name, values in got.items():
+        if name == "time_step":
+            assert float(values) == world.dt
+            continue
+        if name == "body_rot":  # (cos, sin) of the angles, the rows past the bodies' 0
+            angles = want["body_angle"]
+            turned = np.where(np.arange(len(angles))[:, None] < world.batch.n_bodies, 1.0, 0.0)
+            # libm's cos and sin against the kernel's: to round-off of the field's type
+            atol = 4 * float(np.finfo(values.dtype).eps)
+            want_rot = turned * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+            np.testing.assert_allclose(values, want_rot, rtol=0, atol=atol)
+            continue
+        np.testing.assert_array_equal(values, want[name].astype(values.dtype), err_msg=name)
+    assert got["world_nbr_stale"].tolist() == [1] * world.layout.n_worlds  # lists stale

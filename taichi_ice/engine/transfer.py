@@ -8,13 +8,15 @@ Taichi's ``field.from_numpy``, ``to_numpy`` and ``fill`` compile a kernel of the
 each field they touch (the field is the kernel's template argument), and a World has ~80
 fields: on a new set of fields (a new World, ``world.Engines``) the per-field kernels were
 more of the compile time than the step's kernels (the test suite from an empty Taichi cache on
-2 cores: ~21,000 of them, 670 s of its 1,470 s of compiling, against 555 s for the 215
-thread-per-world steppers). ``Transfer`` copies every field of a set in one kernel, a loop
-per field (a task each), to or from one flat buffer per element type: measured on 2 cores,
-49 fields took 0.75-0.9 s to compile as one kernel against 2.6-4.0 s as 49 ``from_numpy`` or
-``fill``. The values are copied, not converted: each buffer holds its fields' own type, so
-a write then a read gives back the arrays bit for bit (``tests/test_transfer.py`` holds the
-kernels against ``from_numpy``/``to_numpy`` on seeded random fields of every type).
+2 cores: ~10,500 of them, 670 s of its 1,470 s of compiling, against 555 s for its 108
+thread-per-world steppers). ``Transfer`` copies every field of a set in one kernel, to or
+from one flat buffer per element type, a loop per distinct shape that copies element i of
+every field of that shape (each loop is a task, and each task costs ~30 ms of compiling):
+measured on 2 cores, 54 fields of every type and shape took 1.0-1.1 s to compile and run each
+way, against 3.7-4.0 s field by field with ``from_numpy`` or ``to_numpy``. The values are
+copied, not converted: each buffer holds its fields' own type, so a write then a read gives
+back the arrays bit for bit (``tests/test_transfer.py`` holds the kernels against
+``from_numpy``/``to_numpy`` on seeded random fields of every type).
 
 Engine-level: it knows Taichi fields and NumPy arrays, nothing of what the fields mean.
 """
@@ -147,7 +149,7 @@ class Transfer:
 
     def _kernel(self, to_fields: bool):
         """The kernel that copies every slot between its field and its kind's buffer, a
-        loop per field (row-major, lanes last: ``to_numpy``'s order)."""
+        loop per shape (row-major, lanes last: ``to_numpy``'s order)."""
         slots = self._slots
         n = len(slots)
         fields = [s.field for s in slots]

@@ -4,6 +4,10 @@ size) or in a size (body count).
 
     python benchmarks/compile_reuse.py --out out/compile
     python benchmarks/compile_reuse.py --out out/compile --scene scenarios/pushed_field.toml
+    python benchmarks/compile_reuse.py --out out/compile-full --optimize full
+
+``--optimize`` is the compile setting every case runs with (``TAICHI_ICE_OPTIMIZE``: off, on
+or full; default: the environment's, else on; ``taichi_ice/backend.py``).
 
 Every case runs in a fresh Python process (as a user's next command would), one after the
 other, all on one Taichi offline cache that starts empty (``TI_OFFLINE_CACHE_FILE_PATH``, a
@@ -120,6 +124,12 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=Path("out/compile_reuse"))
     ap.add_argument("--scene", default=str(ROOT / "scenarios" / "two_squares.toml"))
     ap.add_argument("--until", type=float, default=0.05, help="simulated seconds a case runs")
+    ap.add_argument(
+        "--optimize",
+        choices=("off", "on", "full"),
+        help="the compile setting of every case (TAICHI_ICE_OPTIMIZE; default: the "
+        "environment's, else on)",
+    )
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -130,6 +140,9 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory(prefix="ti-cache-") as cache:
         env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": cache}
+        if args.optimize:
+            env["TAICHI_ICE_OPTIMIZE"] = args.optimize
+        optimize = env.get("TAICHI_ICE_OPTIMIZE") or "on"
         for name, what, changes in CASES:
             cmd = [sys.executable, __file__, "--scene", args.scene, "--until", str(args.until)]
             proc = subprocess.run(
@@ -157,12 +170,13 @@ def main(argv=None) -> int:
                 "machine": platform.platform(),
                 "cpus": os.cpu_count(),
                 "git": git,
+                "optimize": optimize,
                 "cases": rows,
             },
             indent=1,
         )
     )
-    _chart(rows, args.out / "compile_reuse.png", Path(args.scene).stem)
+    _chart(rows, args.out / "compile_reuse.png", f"{Path(args.scene).stem} ({optimize})")
     return 0
 
 

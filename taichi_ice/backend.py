@@ -10,20 +10,25 @@ variable that also governs Taichi's import banner; ``taichi_ice/__init__.py`` se
 unless the user set it).
 
 Compile time: Taichi compiles each kernel for its batch's layout on first use (cached on
-disk afterwards). ``TAICHI_ICE_OPTIMIZE=0`` in the environment (or ``init(optimize=False)``)
-skips Taichi's advanced IR passes: measured on 2 cores, the pillar scene's kernels compile
-in 5 s instead of 15, run as fast on small scenes (jammed pillar, 34 us a step either way)
-and within the noise on large fields (random box of 1e5 blocks: 0.88, 0.94 and 1.29 times
-the optimised throughput in three pairs), with bit-identical trajectories in the scenes
-checked (``tests/test_backend.py`` holds the two against each other). The test suite
-and the accuracy studies (``taichi-ice validate``, but its speed study) compile this way;
-everything else compiles fully optimised unless asked. Measured again with the contact
-integrators (issue 30; one sitting, 2 cores, empty cache, ``two_squares`` a thread per
-world): the first steps took 8.7 s with the passes and 1.3 s without (Euler), 26.6 s and
-2.1 s (analytic), 41.6 s and 2.6 s (coupled); stepping without them, three alternating pairs
-of processes, a world a thread: 1.03-1.18x the time at 1,000 blocks, 1.00-1.11x in the
-jammed pillar; a team of threads at 1e4 blocks: no difference beyond the VM's noise
-(0.69-1.45x).
+disk afterwards), in one of three settings (``TAICHI_ICE_OPTIMIZE`` in the environment, or
+``init(optimize=...)``):
+
+- ``on`` (the default on the CPU, since 2026-11-28): Taichi's advanced IR passes (common
+  subexpressions, loop invariants, algebraic simplification) without its control-flow-graph
+  pass (``cfg_optimization``: store-to-load forwarding and dead stores over the whole
+  kernel), which took three quarters of a first compile and more. Measured on 2 cores, one
+  sitting, each case a fresh process on an empty cache: the pillar scene's first step took
+  22.2-24.0 s with every pass (three runs), 5.1-5.4 s without that one, 3.8-4.5 s with no
+  advanced pass; with the coupled integrator 117 s, 17.8 s and 8.5 s. Stepping, kernels
+  loaded from the cache, alternating processes: the jammed pillar 35.4, 36.0 and 37.7 us a
+  step (means of five), the coupled step's 71.2, 75.0 and 73.9 us (four); a random box of
+  1,000 blocks 141, 153 and 157 us (nine, six, six); of 1e4 blocks stepped by the team
+  1087 and 1136 us (seven; the VM's run-to-run spread 25 %). Trajectories are the same bit
+  for bit in all three (``tests/test_backend.py``).
+- ``full``: every advanced pass, the CFG one included (the default before; on GPU archs it
+  stays the default, not measured there).
+- ``off`` (``0``): no advanced pass. The test suite and the accuracy studies (``taichi-ice
+  validate``, but its speed study) compile this way.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ _current: tuple[str, str] | None = None
 _actual: str | None = None
 _generation = 0  # Taichi starts in this process (``generation``)
 _optimized: bool | None = None  # the running Taichi's advanced passes (``optimized``)
+_level: str | None = None  # the running Taichi's compile setting (``compile_level``)
 # Taichi's names of CPU archs: a GPU arch that fell back runs on one of these.
 _CPU_ARCHES = ("x64", "arm64", "cpu")
 # Seconds a child process may take to start Taichi on a GPU arch (import + driver start).
@@ -50,8 +56,15 @@ PROBE_TIMEOUT = 180.0
 # Bytes of compiled kernels Taichi keeps on disk between processes (see ``init``).
 OFFLINE_CACHE_BYTES = 1 << 30
 
-# Environment variable: "0" (or "false", "no", "off") compiles without Taichi's advanced passes.
+# Environment variable: the compile setting, "off" (or "0"), "on" (or "1") or "full"
+# (``optimize_level``; module docstring).
 OPTIMIZE_ENV = "TAICHI_ICE_OPTIMIZE"
+OPTIMIZE_LEVELS = ("off", "on", "full")
+_OPTIMIZE_NAMES = {
+    "off": ("0", "false", "no", "off"),
+    "on": ("1", "true", "yes", "on"),
+    "full": ("full",),
+}
 
 # The line ti.init prints unconditionally (taichi/lang/misc.py, a plain print to stdout).
 _START_LINE = "[Taichi] Starting on arch="
@@ -306,10 +319,38 @@ def probe(arch: str) -> str:
     return ran
 
 
+def optimize_level(value=None, arch: str = "cpu") -> str:
+    """The compile setting ``value`` names ("off", "on" or "full"; module docstring).
+
+    ``value`` may be a bool (True "on", False "off") or a string: "0", "false", "no" and
+    "off" are "off"; "1", "true", "yes" and "on" are "on"; "full" is "full". None reads
+    ``TAICHI_ICE_OPTIMIZE``, and unset (or empty) is "on" on the CPU, "full" on a GPU arch.
+
+    Raises:
+        BackendError: a value that names none of them (the environment variable's included).
+    """
+    if value is None:
+        value = os.environ.get(OPTIMIZE_ENV, "").strip()
+        if not value:
+            return "on" if arch == "cpu" else "full"
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    text = str(value).strip().lower()
+    for level, names in _OPTIMIZE_NAMES.items():
+        if text in names:
+            return level
+    from .errors import BackendError
+
+    raise BackendError(
+        f"{OPTIMIZE_ENV} (or optimize=) is {value!r}: it must be off (or 0), on (or 1) or "
+        "full; unset it for the default (on)"
+    )
+
+
 def optimize_default() -> bool:
     """Whether kernels compile with Taichi's advanced passes: ``TAICHI_ICE_OPTIMIZE``, on
-    unless it reads "0", "false", "no" or "off"."""
-    return os.environ.get(OPTIMIZE_ENV, "1").strip().lower() not in ("0", "false", "no", "off")
+    (or full) unless it reads "0", "false", "no" or "off"."""
+    return optimize_level() != "off"
 
 
 def init(
@@ -317,7 +358,7 @@ def init(
     precision: str = "f64",
     *,
     reinit: bool = False,
-    optimize: bool | None = None,
+    optimize: bool | str | None = None,
 ) -> None:
     """Start Taichi on ``arch`` with ``precision`` as its default float type.
 
@@ -325,15 +366,16 @@ def init(
         arch: 'cpu', or 'gpu' (Taichi picks CUDA, Vulkan or Metal), or a backend by name.
         precision: 'f64' (default on the CPU) or 'f32'.
         reinit: allow switching arch or precision; every existing field becomes invalid.
-        optimize: compile with Taichi's advanced passes (default: ``TAICHI_ICE_OPTIMIZE``,
-            on); off compiles about 3x faster (module docstring). Applies when this call
-            starts Taichi; a running Taichi keeps its setting.
+        optimize: the compile setting, "off", "on" or "full" (or a bool: on or off; default:
+            ``TAICHI_ICE_OPTIMIZE``, else "on" on the CPU and "full" on a GPU arch;
+            ``optimize_level`` and the module docstring). Applies when this call starts
+            Taichi; a running Taichi keeps its setting.
 
     Raises:
         ValueError: unknown arch or precision, or a different arch/precision than the
             running one without ``reinit``.
     """
-    global _current, _actual, _int_atomics_ok, _loops_ok, _generation, _optimized
+    global _current, _actual, _int_atomics_ok, _loops_ok, _generation, _optimized, _level
     if arch not in ARCHES:
         raise ValueError(f"arch must be one of {ARCHES}, got {arch!r}")
     real_dtype(precision)
@@ -348,7 +390,8 @@ def init(
         )
     import taichi as ti
 
-    advanced = optimize_default() if optimize is None else bool(optimize)
+    level = optimize_level(optimize, arch)
+    advanced = level != "off"
     with _quiet_start():
         ti.init(
             arch=getattr(ti, arch),
@@ -358,6 +401,10 @@ def init(
             # Taichi's offline cache keys kernels by this setting (checked), so kernels
             # compiled one way are never loaded for the other.
             advanced_optimization=advanced,
+            # The control-flow-graph pass, most of a first compile (module docstring); the
+            # cache keys kernels by it too (checked: a kernel compiled with it is compiled
+            # again without it).
+            cfg_optimization=level == "full",
             offline_cache=True,
             # Taichi's default cache holds 100 MB and, past it, drops the least recently used
             # quarter when a process ends. Kernels specialise on their batch's layout, and
@@ -382,6 +429,7 @@ def init(
         )
     _current = wanted
     _optimized = advanced
+    _level = level
     _generation += 1
     _actual = _running_arch()
     spirv = _actual in SPIRV_ARCHES
@@ -427,6 +475,12 @@ def optimized() -> bool | None:
     """Whether the running Taichi compiles with its advanced passes (``init``'s
     ``optimize``), or None before ``init``."""
     return _optimized
+
+
+def compile_level() -> str | None:
+    """The running Taichi's compile setting, "off", "on" or "full" (``init``'s
+    ``optimize``), or None before ``init``."""
+    return _level
 
 
 def current() -> tuple[str, str] | None:

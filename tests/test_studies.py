@@ -128,12 +128,14 @@ def test_the_studies_compile_without_the_advanced_passes_unless_the_user_asks(mo
     from taichi_ice.experiments.validation import compile_for_studies, speed_accuracy
 
     monkeypatch.delenv(OPTIMIZE_ENV, raising=False)
-    assert compile_for_studies() is True  # what the user asked for: the default, on
+    assert compile_for_studies() == "on"  # what the user asked for: the default
     assert os.environ[OPTIMIZE_ENV] == "0"  # what the studies (and their workers) get
     monkeypatch.setenv(OPTIMIZE_ENV, "1")
-    assert compile_for_studies() is True and os.environ[OPTIMIZE_ENV] == "1"
+    assert compile_for_studies() == "on" and os.environ[OPTIMIZE_ENV] == "1"
+    monkeypatch.setenv(OPTIMIZE_ENV, "full")
+    assert compile_for_studies() == "full" and os.environ[OPTIMIZE_ENV] == "full"
     monkeypatch.setenv(OPTIMIZE_ENV, "off")
-    assert compile_for_studies() is False and os.environ[OPTIMIZE_ENV] == "off"
+    assert compile_for_studies() == "off" and os.environ[OPTIMIZE_ENV] == "off"
 
     seen = []
 
@@ -143,6 +145,6 @@ def test_the_studies_compile_without_the_advanced_passes_unless_the_user_asks(mo
         return SimpleNamespace(returncode=0)
 
     monkeypatch.setattr(subprocess, "run", fake_run)
-    for optimize in (True, False, None):
+    for optimize in (True, False, "full", None):
         speed_accuracy._run_worker("f64", "cpu", 10, True, optimize)
-    assert seen == ["1", "0", "off"]  # None: the environment's, inherited
+    assert seen == ["on", "off", "full", "off"]  # None: the environment's, inherited

@@ -217,6 +217,8 @@ def _meta(args, precisions: list[str], steps: int, bandwidth: dict, failed: list
         "seed": args.seed,
         "threads": args.threads or os.cpu_count(),
         "cold_cache": not args.warm_cache,
+        # The compile setting the workers inherit (TAICHI_ICE_OPTIMIZE; backend.optimize_level).
+        "optimize": _optimize_setting(args.arch),
         "machine": platform.node(),
         "cpu": _cpu_model(),
         "cpu_count": os.cpu_count(),
@@ -229,6 +231,12 @@ def _meta(args, precisions: list[str], steps: int, bandwidth: dict, failed: list
         "bandwidth": bandwidth,
         "failed": failed,
     }
+
+
+def _optimize_setting(arch: str) -> str:
+    from ... import backend
+
+    return backend.optimize_level(None, "cpu" if arch == "cpu" else "gpu")
 
 
 def _cpu_model() -> str:

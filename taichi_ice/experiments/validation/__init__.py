@@ -38,9 +38,10 @@ from pathlib import Path
 __all__ = ["compile_for_studies", "validate_command"]
 
 
-def compile_for_studies() -> bool:
+def compile_for_studies() -> str:
     """Let the accuracy studies compile without Taichi's advanced passes, unless the user
-    set ``TAICHI_ICE_OPTIMIZE``; returns the setting the user asked for (default: on).
+    set ``TAICHI_ICE_OPTIMIZE``; returns the setting the user asked for ("off", "on" or
+    "full"; default: on, ``backend.optimize_level``).
 
     The studies build dozens of layouts (integrators, laws, batches, precisions) for runs of
     seconds: with the passes, compiling was most of ``validate --dem`` (issue 30: the coupled
@@ -51,7 +52,7 @@ def compile_for_studies() -> bool:
     """
     from ... import backend
 
-    wanted = backend.optimize_default()
+    wanted = backend.optimize_level()
     os.environ.setdefault(backend.OPTIMIZE_ENV, "0")
     return wanted
 

@@ -409,6 +409,7 @@ def worker(precision: str, folder: Path, cfg: dict[str, Any], log) -> dict[str, 
         "precision": precision,
         # The wall times were taken with kernels compiled this way (``compile_for_studies``).
         "advanced_optimization": backend.optimized(),
+        "optimize": backend.compile_level(),
         "records": store.records,
     }
     if precision == "f64" and cfg["stability"]:
@@ -509,6 +510,7 @@ def run(
     summary["advanced_optimization"] = {
         p: part.get("advanced_optimization") for p, part in parts.items()
     }
+    summary["optimize"] = {p: part.get("optimize") for p, part in parts.items()}
     figure = out_dir / "dem_accuracy.png"
     dem_charts.plot_accuracy(summary, figure)
     stability_figure = out_dir / "dem_stability.png"

@@ -291,20 +291,23 @@ def tables(summary: dict[str, Any]) -> str:
                     + ("" if fit["converges"] else " (no)")
                 )
             out.append(f"| {scene}: {m} | " + " | ".join(cells) + " |")
-    # How the kernels were compiled (runs from before it was recorded: not said).
+    # How the kernels were compiled (runs from before it was recorded: not said): the
+    # setting (off, on, full) since it was recorded, before it the advanced passes' switch.
+    how = {True: "with Taichi's advanced passes", False: "without Taichi's advanced passes"}
     compiled = {
-        p: v for p, v in (summary.get("advanced_optimization") or {}).items() if v is not None
+        p: f"with TAICHI_ICE_OPTIMIZE={v}"
+        for p, v in (summary.get("optimize") or {}).items()
+        if v is not None
+    } or {
+        p: how[v] for p, v in (summary.get("advanced_optimization") or {}).items() if v is not None
     }
-    how = {True: "with", False: "without"}
     if len(set(compiled.values())) == 1:
-        setting = how[next(iter(compiled.values()))]
+        setting = next(iter(compiled.values()))
     else:
-        setting = ", ".join(f"{p} {how[v]}" for p, v in sorted(compiled.items()))
+        setting = ", ".join(f"{p} {v}" for p, v in sorted(compiled.items()))
     out.append(
         "\nCost: wall time per step of one world alone (us), and per simulated second "
-        "at dt = 0.2 stable_dt (s)"
-        + (f"; kernels compiled {setting} Taichi's advanced passes" if setting else "")
-        + ":\n"
+        "at dt = 0.2 stable_dt (s)" + (f"; kernels compiled {setting}" if setting else "") + ":\n"
     )
     out.append("| scene | law | integrator | precision | us per step | s per simulated s at 0.2 |")
     out.append("|---|---|---|---|---:|---:|")

@@ -183,6 +183,7 @@ def worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[st
         "precision": precision,
         "arch": arch,
         "advanced_optimization": backend.optimized(),
+        "optimize": backend.compile_level(),
         "threads": os.cpu_count(),
         "runs": runs,
         "timings": timings,
@@ -191,14 +192,14 @@ def worker(precision: str, arch: str, n_interfaces: int, quick: bool) -> dict[st
 
 
 def _run_worker(
-    precision: str, arch: str, n_interfaces: int, quick: bool, optimize: bool | None
+    precision: str, arch: str, n_interfaces: int, quick: bool, optimize: bool | str | None
 ) -> dict[str, Any]:
     from ... import backend
 
     package_root = str(Path(__file__).resolve().parents[3])  # the folder holding taichi_ice/
     env = dict(os.environ)
     if optimize is not None:
-        env[backend.OPTIMIZE_ENV] = "1" if optimize else "0"
+        env[backend.OPTIMIZE_ENV] = backend.optimize_level(optimize)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
@@ -234,7 +235,7 @@ def run(
     arch: str = "cpu",
     n_interfaces: int | None = None,
     precisions: tuple[str, ...] = ("f64", "f32"),
-    optimize: bool | None = None,
+    optimize: bool | str | None = None,
 ) -> dict[str, Any]:
     """Measure error against step and against wall time; write the chart and the JSON.
 
@@ -244,9 +245,9 @@ def run(
         arch: Taichi arch of the workers.
         n_interfaces: interfaces in the timing runs (default 1e6, or 1e4 when quick).
         precisions: the precisions to measure, each in its own process.
-        optimize: the workers compile with Taichi's advanced passes (None: as
+        optimize: the workers' compile setting, "off", "on" or "full" (or a bool; None: as
             ``TAICHI_ICE_OPTIMIZE`` says; ``validate`` passes the user's setting, since the
-            other studies compile without them: ``compile_for_studies``).
+            other studies compile without Taichi's advanced passes: ``compile_for_studies``).
 
     Returns:
         The JSON summary as a dict.

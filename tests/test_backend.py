@@ -175,3 +175,30 @@ def test_the_integer_atomics_probe_passes_on_a_correct_device(taichi_runtime):
         assert works and not backend.float_gather()
         assert state.quantum_dtype() == ti.i64
     assert state.quantum_dtype() == (ti.f64 if backend.float_gather() else ti.i64)
+
+
+def test_a_kernel_error_still_names_its_file_line_and_column(taichi_runtime):
+    """Taichi's source positions come from ``backend.source_position`` (no line wrapping:
+    a third of a cached start), and an error in a kernel still says where, held against this
+    file's own text."""
+    from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
+
+    assert ASTTransformerContext.get_pos_info is backend.source_position
+
+    out = ti.field(ti.i32, shape=())
+
+    @ti.kernel
+    def broken():
+        total = 1
+        total += undefined_on_purpose  # noqa: F821
+        out[None] = total
+
+    with pytest.raises(Exception, match="undefined_on_purpose") as info:
+        broken()
+    text = open(__file__).read().splitlines()
+    lineno = next(i for i, ln in enumerate(text, 1) if "undefined_on_purpose  # noqa" in ln)
+    column = text[lineno - 1].index("undefined_on_purpose")
+    lines = str(info.value).splitlines()
+    at = lines.index(f'File "{__file__}", line {lineno}, in broken:')
+    assert lines[at + 1] == text[lineno - 1]
+    assert lines[at + 2] == " " * column + "^" * len("undefined_on_purpose")

@@ -48,7 +48,6 @@ _current: tuple[str, str] | None = None
 # The arch Taichi actually runs on ("cpu", "cuda", "vulkan", "metal"), read back after start.
 _actual: str | None = None
 _generation = 0  # Taichi starts in this process (``generation``)
-_optimized: bool | None = None  # the running Taichi's advanced passes (``optimized``)
 _level: str | None = None  # the running Taichi's compile setting (``compile_level``)
 # Taichi's names of CPU archs: a GPU arch that fell back runs on one of these.
 _CPU_ARCHES = ("x64", "arm64", "cpu")
@@ -60,7 +59,6 @@ OFFLINE_CACHE_BYTES = 1 << 30
 # Environment variable: the compile setting, "off" (or "0"), "on" (or "1") or "full"
 # (``optimize_level``; module docstring).
 OPTIMIZE_ENV = "TAICHI_ICE_OPTIMIZE"
-OPTIMIZE_LEVELS = ("off", "on", "full")
 _OPTIMIZE_NAMES = {
     "off": ("0", "false", "no", "off"),
     "on": ("1", "true", "yes", "on"),
@@ -348,12 +346,6 @@ def optimize_level(value=None, arch: str = "cpu") -> str:
     )
 
 
-def optimize_default() -> bool:
-    """Whether kernels compile with Taichi's advanced passes: ``TAICHI_ICE_OPTIMIZE``, on
-    (or full) unless it reads "0", "false", "no" or "off"."""
-    return optimize_level() != "off"
-
-
 def init(
     arch: str = "cpu",
     precision: str = "f64",
@@ -376,7 +368,7 @@ def init(
         ValueError: unknown arch or precision, or a different arch/precision than the
             running one without ``reinit``.
     """
-    global _current, _actual, _int_atomics_ok, _loops_ok, _generation, _optimized, _level
+    global _current, _actual, _int_atomics_ok, _loops_ok, _generation, _level
     if arch not in ARCHES:
         raise ValueError(f"arch must be one of {ARCHES}, got {arch!r}")
     real_dtype(precision)
@@ -432,7 +424,6 @@ def init(
             fast_math=False,
         )
     _current = wanted
-    _optimized = advanced
     _level = level
     _generation += 1
     _actual = _running_arch()
@@ -517,8 +508,8 @@ def generation() -> int:
 
 def optimized() -> bool | None:
     """Whether the running Taichi compiles with its advanced passes (``init``'s
-    ``optimize``), or None before ``init``."""
-    return _optimized
+    ``optimize`` on or full), or None before ``init``."""
+    return None if _level is None else _level != "off"
 
 
 def compile_level() -> str | None:

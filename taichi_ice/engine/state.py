@@ -40,8 +40,8 @@ def ti_dtype(v: Var, layout: Layout):
 
 
 def make_field(v: Var, layout: Layout):
-    """One Taichi field as declared (a switched-off or empty field gets one element), not
-    yet filled with its ``init`` value (``Fields`` fills a group once it is declared)."""
+    """One Taichi field as declared (a switched-off or empty field gets one element); its
+    ``init`` value is written with every other field's start (``start_arrays``)."""
     shape = schema.allocated_shape(layout, v)
     dtype = ti_dtype(v, layout)
     if v.lanes > 1:
@@ -74,10 +74,14 @@ def _join_tree(width: int) -> None:
 class Fields:
     """A group of declared fields as attributes (``fields.body_pos``).
 
-    Every field is declared before any is filled: Taichi places the fields declared since
-    its last kernel launch in one tree of memory, a fill is a launch, and a process holds at
-    most 512 trees (Taichi's LLVM backends). Filled as declared, a World took 5 trees, and a
-    process (the test suite) could build no more than ~100 Worlds; filled afterwards, 2.
+    Declared only: nothing is launched here. Taichi places the fields declared since its
+    last kernel launch in one tree of memory, and a process holds at most 512 trees (Taichi's
+    LLVM backends): filled as declared, a World took 5 trees, and a process (the test suite)
+    could build no more than ~100 Worlds. The fields get their values, ``init`` or the
+    scenes', all at once in the World's first launch (``World._start``: ``start_arrays``
+    through ``transfer.Transfer``), so a World's groups share one tree. (Filling the four
+    fields whose ``init`` is not 0 here, as before, compiled Taichi's fill kernel once per
+    field and World, ~60 ms each on 2 cores, for values the first launch wrote again.)
     """
 
     def __init__(self, layout: Layout, decls: Iterable[Var]):
@@ -94,7 +98,7 @@ class Fields:
         # followed by a 4-byte pad. That was not enough: a 3-body World in float32 still
         # lost 4 fields (body_pos, body_vel, probe_impulse, nbr_ref_angle) on lavapipe. So
         # there no tree holds fields of both widths (``_join_tree``): a World's fields take
-        # 6-7 trees instead of 2. The CPU and CUDA compute the same either way.
+        # 6-7 trees instead of 1. The CPU and CUDA compute the same either way.
         self._pads = []
         split = backend.actual_arch() in backend.SPIRV_ARCHES
         for v in sorted(decls, key=lambda v: -_scalar_bytes(v, layout)):
@@ -105,9 +109,6 @@ class Fields:
             size = int(np.prod(schema.allocated_shape(layout, v), dtype=np.int64)) * v.lanes
             if _scalar_bytes(v, layout) == 4 and size % 2:
                 self._pads.append(ti.field(ti.i32, shape=()))
-        for v in decls:
-            if v.init not in (0, schema.HOST):
-                getattr(self, v.name).fill(v.init)
 
 
 class Model(Fields):

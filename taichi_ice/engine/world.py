@@ -76,7 +76,7 @@ FEW_WORLDS_MAX_BODIES = 2000
 # On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
 GPU_MIN_WORLDS = 1024
-# Trees of Taichi fields a World may add on the CPU and CUDA (``state.Fields``: 2, and the
+# Trees of Taichi fields a World may add on the CPU and CUDA (``state.Fields``: 1, and the
 # team's words; ~7 on SPIR-V, which has no limit).
 TREES_PER_WORLD = 3
 

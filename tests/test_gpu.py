@@ -210,15 +210,24 @@ def test_every_field_of_a_world_holds_its_own_values(name, taichi_runtime):
     arch: Taichi 1.7.4's SPIR-V backend overlapped a 32-bit field of an odd length with the
     64-bit field beside it (4 of a World's 33 fields on Vulkan, before ``state.Fields`` laid
     them out 64-bit first with pads; with 3 bodies in float32, 4 fields still did, until
-    64-bit and 32-bit fields had trees of their own there)."""
+    64-bit and 32-bit fields had trees of their own there).
+
+    The numbers go in as the World starts its fields, all in one launch
+    (``transfer.Transfer.write``: Taichi's ``fill`` compiles a kernel per field, ~110 a World,
+    which took most of this test's time); each is read back by Taichi's own ``to_numpy``."""
     from taichi_ice.engine.world import World
 
     arch, precision = taichi_runtime
     scene = scene_from_dict(THREE_BODIES) if name == "three_bodies" else load_scenario(name)
     world = World([scene], precision=precision, stepping="bodies")
     groups = (world.model, world.data, world.neighbours, world.hash)
-    fields = [(f"{g.__class__.__name__}.{n}", getattr(g, n)) for g in groups for n in g.names]
-    for k, (_, field) in enumerate(fields):
-        field.fill(k + 1)
-    lost = [name for k, (name, field) in enumerate(fields) if not np.all(field.to_numpy() == k + 1)]
+    fields = [(g.__class__.__name__, n, getattr(g, n)) for g in groups for n in g.names]
+    assert sorted(n for _, n, _ in fields) == sorted(world.transfer.names)
+    shapes = world.transfer.shapes()
+    world.transfer.write({n: np.full(shapes[n], k + 1) for k, (_, n, _) in enumerate(fields)})
+    lost = [
+        f"{group}.{n}"
+        for k, (group, n, field) in enumerate(fields)
+        if not np.all(field.to_numpy() == k + 1)
+    ]
     assert not lost, f"on {arch}/{precision}"

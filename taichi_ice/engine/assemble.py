@@ -56,9 +56,11 @@ MAX_VERTS_LIMIT = MAX_VERTICES
 # The sizes a layout compiles for are capacities: the scenes' counts rounded up to a few
 # values (``capacity``), with a floor each, so that scenes of nearby sizes share a layout and
 # its compiled kernels (a World reloaded with them, or Taichi's offline cache in another
-# process). Powers of two up to CAPACITY_POW2_MAX (memory is no concern there), then steps
-# of an eighth to a sixteenth of the count (at most 12.5 % of rows unused at 1e4 bodies and
-# up). The rows past the scenes' are never read: the kernels loop over ``body_count``.
+# process that builds its fields in the same order: the cache's keys hold the fields' node
+# ids, docs/architecture.md). Powers of two up to CAPACITY_POW2_MAX (memory is no concern
+# there), then steps of an eighth to a sixteenth of the count (at most 12.5 % of rows unused
+# at 1e4 bodies and up). The rows past the scenes' are never read: the kernels loop over
+# ``body_count``.
 # Worlds take a floor of 8: a world alone and a batch of up to 8 share one layout, and so
 # one set of compiled kernels (a World of one and then of a batch in one process, as tests,
 # ensembles and a user's first runs do, compiled twice with a floor of 1). A world past the

@@ -570,8 +570,7 @@ class Simulation:
     def _frame(self, writers) -> None:
         if not writers:
             return
-        pos, ang = self.world.positions(), self.world.angles()
-        vel, om = self.world.velocities(), self.world.omegas()
+        pos, ang, vel, om = self.world.motion()
         rows = contact_rows(self.world) if self.contacts else [None] * len(writers)
         for w, sl, r in zip(writers, self.world.world_slices(), rows):
             w.add_frame(self.world.time, pos[sl], ang[sl], vel[sl], om[sl], contacts=r)

@@ -145,3 +145,30 @@ def test_a_worlds_motion_is_its_four_readers_in_one_launch(taichi_runtime):
         assert g.shape == w.shape and g.shape[0] == 6, name
         np.testing.assert_array_equal(g, w, err_msg=name)
     assert np.all(got[3] != 0.0)  # the squares spin: the check compares moving values
+
+
+def test_world_read_gives_what_to_numpy_gives_for_fields_of_every_group(taichi_runtime):
+    """``World.read`` (the contact rows' reads): fields of the model, the state, the hash and
+    the lists, of every type, equal Taichi's ``to_numpy`` of each, bit for bit, after steps;
+    the same set read again takes the same reader; an unknown name is refused by name."""
+    world = World([load_scenario("scenarios/two_squares.toml")] * 2)
+    world.advance(round(0.3 / world.dt))
+    world.check()
+    names = ["body_mass", "body_vel", "contact_count", "contact_xi", "nbr_ids", "sorted_ids"]
+    names.append("grid_inv_cell")  # 0-d
+    holders = (world.model, world.data, world.hash, world.neighbours)
+    got = world.read(names)
+    assert list(got) == names
+    for name in names:
+        holder = next(h for h in holders if name in h.names)
+        want = getattr(holder, name).to_numpy()
+        assert got[name].dtype == want.dtype, name
+        np.testing.assert_array_equal(got[name], want, err_msg=name)
+    assert np.any(got["body_vel"] != 0.0)  # moving values
+    # (a World on the fields of one gone, as here after the test above, keeps its readers)
+    readers = dict(world.readers)
+    assert readers[tuple(names)] is not None
+    world.read(names)
+    assert world.readers == readers
+    with pytest.raises(KeyError, match="no field 'body_size'"):
+        world.read(["body_pos", "body_size"])

@@ -157,30 +157,31 @@ def _outlines(model: ReferenceModel, rot: np.ndarray, max_verts: int):
 
 def _read(world) -> dict:
     """The state the contact stage reads at the start of a step, as float64 host arrays."""
-    d, layout, n = world.data, world.layout, world.batch.n_bodies
-
-    def get(field, real=True):
-        a = field.to_numpy()[:n]
-        return a.astype(np.float64) if real else a
-
-    out = {
-        "pos": get(d.body_pos),
-        "rot": get(d.body_rot),
-        "vel": get(d.body_vel),
-        "omega": get(d.body_omega),
-        "count": get(d.contact_count, False),
-        "partner": get(d.contact_partner, False),
-        "xi": get(d.contact_xi),
+    layout, n = world.layout, world.batch.n_bodies
+    names = {  # key: (field, a real to float64)
+        "pos": ("body_pos", True),
+        "rot": ("body_rot", True),
+        "vel": ("body_vel", True),
+        "omega": ("body_omega", True),
+        "count": ("contact_count", False),
+        "partner": ("contact_partner", False),
+        "xi": ("contact_xi", True),
     }
     if layout.rate_state:
-        out["theta"], out["slip"] = get(d.contact_theta), get(d.contact_slip)
+        names["theta"], names["slip"] = ("contact_theta", True), ("contact_slip", True)
     if layout.crushing:
-        out["crushed"] = get(d.contact_crushed)
+        names["crushed"] = ("contact_crushed", True)
     if layout.analytic:
-        out["force"] = get(d.contact_force)
+        names["force"] = ("contact_force", True)
     if layout.velocity_changes:
-        out["dvel"], out["domega"] = get(d.body_dvel), get(d.body_domega)
-    else:
+        names["dvel"], names["domega"] = ("body_dvel", True), ("body_domega", True)
+    # One launch for all of them (``World.read``), not a to_numpy kernel per field.
+    got = world.read([field for field, _ in names.values()])
+    out = {}
+    for key, (field, real) in names.items():
+        a = got[field][:n]
+        out[key] = a.astype(np.float64) if real else a
+    if not layout.velocity_changes:
         out["dvel"], out["domega"] = np.zeros((n, 2)), np.zeros(n)
     return out
 

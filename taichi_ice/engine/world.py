@@ -227,8 +227,8 @@ class World:
             "stepper": stepper,
             "team": team,
             "transfer": Transfer(declared),
-            # The four fields a frame reads (``motion``), in one launch.
-            "motion_transfer": Transfer({n: getattr(data, n) for n in MOTION_FIELDS}),
+            # ``read``'s Transfers, one per set of fields read, kept with the fields.
+            "readers": {},
             # What this World's kernels ran ("advance", "sampled"): those are compiled, for
             # the next World on these fields too (``compiled``).
             "launched": set(),
@@ -450,9 +450,29 @@ class World:
         frame. One kernel for the four fields (``transfer.Transfer``), compiled once for the
         World's fields, where Taichi's ``to_numpy`` compiles a kernel for each field (four
         per new World, 0.1-0.2 s each on 2 cores with an empty cache)."""
-        got = self.motion_transfer.read()
+        got = self.read(MOTION_FIELDS)
         n = self.batch.n_bodies
         return tuple(got[name][:n].astype(np.float64) for name in MOTION_FIELDS)
+
+    def read(self, names: Sequence[str]) -> dict[str, np.ndarray]:
+        """Fields by name (any of ``schema.groups()``), ``{name: array}`` as ``to_numpy``
+        gives each (the whole capacity), in one launch: a ``transfer.Transfer`` of these
+        names, compiled at its first read and kept with the fields for every later read,
+        also by the next World on them. For reads that come back (a run's frames, its
+        contacts): Taichi's ``to_numpy`` compiles a kernel for every field a new World reads.
+        """
+        key = tuple(names)
+        reader = self.readers.get(key)
+        if reader is None:
+            groups = (self.model, self.data, self.hash, self.neighbours)
+            fields = {}
+            for name in key:
+                holder = next((g for g in groups if name in g.names), None)
+                if holder is None:
+                    raise KeyError(f"World.read: no field {name!r} (schema.groups())")
+                fields[name] = getattr(holder, name)
+            reader = self.readers[key] = Transfer(fields)
+        return reader.read()
 
     def positions(self) -> np.ndarray:
         """``(N, 2)`` centroids of every body of every world (m)."""

@@ -128,10 +128,11 @@ def test_a_world_starts_with_the_declared_values_in_every_field(taichi_runtime):
     assert got["world_nbr_stale"].tolist() == [1] * world.layout.n_worlds  # lists stale
 
 
-def test_a_worlds_motion_is_its_four_readers_in_one_launch(taichi_runtime):
-    """``World.motion`` (one Transfer launch, what a run's frames read) gives what the four
-    readers give field by field through Taichi's ``to_numpy``, bit for bit, after steps
-    that moved and turned the bodies; and only the scenes' bodies, not the capacity's."""
+def test_a_worlds_motion_is_its_four_fields_read_in_one_launch(taichi_runtime):
+    """``World.motion`` (one Transfer launch: a run's frames, and ``positions``,
+    ``angles``, ``velocities``, ``omegas``) gives what Taichi's ``to_numpy`` reads from the
+    four fields, bit for bit, after steps that moved and turned the bodies; and only the
+    scenes' bodies, not the capacity's."""
     raw = copy.deepcopy(dict(load_scenario("scenarios/two_squares.toml").raw))
     raw["body"][0]["angle"] = 0.3  # a corner first: the collision turns both squares
     scene = scene_from_dict(raw)
@@ -139,11 +140,16 @@ def test_a_worlds_motion_is_its_four_readers_in_one_launch(taichi_runtime):
     world.advance(round(0.4 / world.dt))
     world.check()
     got = world.motion()
-    want = (world.positions(), world.angles(), world.velocities(), world.omegas())
+    d = world.data
+    fields = (d.body_pos, d.body_angle, d.body_vel, d.body_omega)
+    want = [f.to_numpy()[:6].astype(np.float64) for f in fields]
     assert world.batch.n_bodies == 6 < world.layout.n_bodies
     for name, g, w in zip(("positions", "angles", "velocities", "omegas"), got, want):
-        assert g.shape == w.shape and g.shape[0] == 6, name
+        assert g.shape == w.shape and g.dtype == np.float64, name
         np.testing.assert_array_equal(g, w, err_msg=name)
+    readers = (world.positions(), world.angles(), world.velocities(), world.omegas())
+    for g, r in zip(got, readers):
+        np.testing.assert_array_equal(r, g)
     assert np.all(got[3] != 0.0)  # the squares spin: the check compares moving values
 
 

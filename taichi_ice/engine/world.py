@@ -446,8 +446,9 @@ class World:
         return self.data.world_energy.to_numpy()[: len(self.scenes)]
 
     def motion(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(positions(), angles(), velocities(), omegas())`` read in one launch: a run's
-        frame. One kernel for the four fields (``transfer.Transfer``), compiled once for the
+        """``(N, 2)`` positions (m), ``(N,)`` angles (rad), ``(N, 2)`` velocities (m/s) and
+        ``(N,)`` spins (rad/s) of every body of every world, float64, read in one launch (a
+        run's frame). One kernel for the four fields (``read``), compiled once for the
         World's fields, where Taichi's ``to_numpy`` compiles a kernel for each field (four
         per new World, 0.1-0.2 s each on 2 cores with an empty cache)."""
         got = self.read(MOTION_FIELDS)
@@ -474,21 +475,24 @@ class World:
             reader = self.readers[key] = Transfer(fields)
         return reader.read()
 
+    # The four readers take ``motion``'s one launch (and its one kernel a World, where each
+    # field's own ``to_numpy`` compiled one); each returns its part.
+
     def positions(self) -> np.ndarray:
         """``(N, 2)`` centroids of every body of every world (m)."""
-        return self.data.body_pos.to_numpy()[: self.batch.n_bodies].astype(np.float64)
+        return self.motion()[0]
 
     def angles(self) -> np.ndarray:
         """``(N,)`` angles (rad)."""
-        return self.data.body_angle.to_numpy()[: self.batch.n_bodies].astype(np.float64)
+        return self.motion()[1]
 
     def velocities(self) -> np.ndarray:
         """``(N, 2)`` centroid velocities (m/s)."""
-        return self.data.body_vel.to_numpy()[: self.batch.n_bodies].astype(np.float64)
+        return self.motion()[2]
 
     def omegas(self) -> np.ndarray:
         """``(N,)`` angular velocities (rad/s)."""
-        return self.data.body_omega.to_numpy()[: self.batch.n_bodies].astype(np.float64)
+        return self.motion()[3]
 
     def take_probe_impulses(self) -> np.ndarray:
         """``(P, 2)`` contact impulse on each probe since the last call (N s); resets them."""

@@ -19,6 +19,7 @@ from taichi_ice.engine import schema
 from taichi_ice.engine.state import start_arrays
 from taichi_ice.engine.transfer import Transfer
 from taichi_ice.engine.world import World
+from taichi_ice.errors import UsageError
 from taichi_ice.scene.parse import scene_from_dict
 
 NUMPY = {ti.f64: np.float64, ti.f32: np.float32, ti.i32: np.int32, ti.i64: np.int64}
@@ -176,5 +177,5 @@ def test_world_read_gives_what_to_numpy_gives_for_fields_of_every_group(taichi_r
     assert readers[tuple(names)] is not None
     world.read(names)
     assert world.readers == readers
-    with pytest.raises(KeyError, match="no field 'body_size'"):
+    with pytest.raises(UsageError, match="no field 'body_size'"):
         world.read(["body_pos", "body_size"])

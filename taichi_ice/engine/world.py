@@ -25,8 +25,6 @@ contact and integration code body by body. All three give bit-identical states.
 from __future__ import annotations
 
 import dataclasses
-import gc
-import threading
 import weakref
 from collections.abc import Sequence
 
@@ -41,6 +39,7 @@ from .assemble import LIST_SLOTS, assemble
 from .broadphase import NeighbourList, SpatialHash
 from .contact import ContactStage
 from .energy import SAMPLE_COLUMNS, EnergyMeter
+from .engines import ENGINES, Engines
 from .integrate import Integrator
 from .options import Options, options_of
 from .stepper import NO_SAMPLE, BodyTeam, WorldStepper
@@ -449,8 +448,8 @@ class World:
         """``(N, 2)`` positions (m), ``(N,)`` angles (rad), ``(N, 2)`` velocities (m/s) and
         ``(N,)`` spins (rad/s) of every body of every world, float64, read in one launch (a
         run's frame). One kernel for the four fields (``read``), compiled once for the
-        World's fields, where Taichi's ``to_numpy`` compiles a kernel for each field (four
-        per new World, 0.1-0.2 s each on 2 cores with an empty cache)."""
+        World's fields, where Taichi's ``to_numpy`` compiles a kernel for each field (about
+        0.1 s each on 2 cores with an empty cache, for every new World)."""
         got = self.read(MOTION_FIELDS)
         n = self.batch.n_bodies
         return tuple(got[name][:n].astype(np.float64) for name in MOTION_FIELDS)
@@ -458,9 +457,13 @@ class World:
     def read(self, names: Sequence[str]) -> dict[str, np.ndarray]:
         """Fields by name (any of ``schema.groups()``), ``{name: array}`` as ``to_numpy``
         gives each (the whole capacity), in one launch: a ``transfer.Transfer`` of these
-        names, compiled at its first read and kept with the fields for every later read,
-        also by the next World on them. For reads that come back (a run's frames, its
-        contacts): Taichi's ``to_numpy`` compiles a kernel for every field a new World reads.
+        names, compiled at its first read and kept with the fields for every later read, by
+        this World and by the next one on its fields. What a run reads again and again (its
+        frames, its contacts) reads so; Taichi's ``to_numpy`` compiles a kernel for every
+        field that a new World reads.
+
+        Raises:
+            UsageError: a name that is no field of the World (``schema.groups()``).
         """
         key = tuple(names)
         reader = self.readers.get(key)
@@ -470,13 +473,17 @@ class World:
             for name in key:
                 holder = next((g for g in groups if name in g.names), None)
                 if holder is None:
-                    raise KeyError(f"World.read: no field {name!r} (schema.groups())")
+                    raise UsageError(
+                        f"World.read: no field {name!r}; the fields are those of "
+                        "taichi_ice.engine.schema.groups()"
+                    )
                 fields[name] = getattr(holder, name)
             reader = self.readers[key] = Transfer(fields)
         return reader.read()
 
     # The four readers take ``motion``'s one launch (and its one kernel a World, where each
-    # field's own ``to_numpy`` compiled one); each returns its part.
+    # field's own ``to_numpy`` compiled one); each returns its part, having copied the
+    # other three fields too.
 
     def positions(self) -> np.ndarray:
         """``(N, 2)`` centroids of every body of every world (m)."""
@@ -514,82 +521,6 @@ class World:
     def probe_slices(self) -> list[slice]:
         """Probe index range of each world."""
         return self.batch.probe_slices()
-
-
-class Engines:
-    """The fields and compiled stages of Worlds that are gone, by layout, for the next World
-    of that layout in this process.
-
-    A World's kernels close over its fields, so a new World compiles every kernel anew even
-    where the process compiled the same ones before (Taichi keys them by the fields; its
-    offline cache serves only a new process), and Taichi frees no field before the process
-    ends. So when a World is collected its parts (fields and stages, ``World._build``) come
-    here, and a World built later for the same layout, stepping and team takes them,
-    every field back to its start (``World._start``, as ``World.reload``): no new fields,
-    nothing compiled, and, bit for bit, the run of a World on new fields
-    (``tests/test_options.py``). Parts of an earlier Taichi start are dropped.
-
-    Attributes:
-        built, reused: Worlds built on new fields, and on fields of a World gone, so far.
-        holders: callables ``release(key) -> bool`` of what keeps idle Worlds, asked to let
-            go of one of ``key`` before a World is built anew (``engine.pool`` adds its own).
-    """
-
-    def __init__(self):
-        self._idle: dict[tuple, list[dict]] = {}
-        self._lock = threading.Lock()
-        self.built = 0
-        self.reused = 0
-        self.holders: list = []
-
-    def take(self, key: tuple) -> dict | None:
-        """The parts of a World gone for ``key`` (layout, stepping, team, generation), or
-        None (the caller builds them: counted as built).
-
-        Before answering None (and the caller compiling a set anew: seconds), it asks
-        whoever keeps idle Worlds (``holders``: the process's pool, ``pool.WorldPool.release``,
-        where a ``Simulation`` gone leaves its World) to let go of one of ``key``, and runs
-        Python's collector, since a World gone in a reference cycle gives its parts back
-        only then."""
-        parts = self._pop(key)
-        if parts is None:
-            for release in list(self.holders):
-                if release(key):
-                    break
-            gc.collect()  # outside the lock: the finalizers it runs call give_back
-            parts = self._pop(key)
-        with self._lock:
-            if parts is None:
-                self.built += 1
-            else:
-                self.reused += 1
-        return parts
-
-    def _pop(self, key: tuple) -> dict | None:
-        with self._lock:
-            generation = key[-1]
-            self._idle = {k: v for k, v in self._idle.items() if k[-1] == generation and v}
-            idle = self._idle.get(key)
-            return idle.pop() if idle else None
-
-    def give_back(self, key: tuple, parts: dict) -> None:
-        """``parts`` of a World gone, for the next World of ``key``."""
-        with self._lock:
-            self._idle.setdefault(key, []).append(parts)
-
-    def clear(self) -> None:
-        """Forget every idle part (their fields stay allocated until the process ends)."""
-        with self._lock:
-            self._idle.clear()
-
-    def idle(self) -> int:
-        """Parts waiting for a World."""
-        with self._lock:
-            return sum(len(v) for v in self._idle.values())
-
-
-# This process's idle parts of Worlds.
-ENGINES = Engines()
 
 
 def _layout_difference(have, want) -> str:

@@ -75,9 +75,9 @@ FEW_WORLDS_MAX_BODIES = 2000
 # On a GPU a thread per world leaves the device idle unless there are thousands of worlds;
 # "auto" steps them so only from this many worlds on (not measured: no GPU was lent yet).
 GPU_MIN_WORLDS = 1024
-# Trees of Taichi fields a World may add on the CPU and CUDA (``state.Fields``: 1, and the
-# team's words; ~7 on SPIR-V, which has no limit).
-TREES_PER_WORLD = 3
+# Trees of Taichi fields a World may add on the CPU and CUDA: 1 (``state.Fields``, its
+# first launch), 2 with the team's words (measured); ~7 on SPIR-V, which has no limit.
+TREES_PER_WORLD = 2
 
 # What ``World.motion`` reads, in its order: positions, angles, velocities, omegas.
 MOTION_FIELDS = ("body_pos", "body_angle", "body_vel", "body_omega")
@@ -192,7 +192,7 @@ class World:
         if limit is not None and backend.field_trees() + TREES_PER_WORLD > limit:
             raise UsageError(
                 f"this process holds {backend.field_trees()} trees of Taichi fields, the most "
-                f"it can ({limit}: about {limit // TREES_PER_WORLD}-{limit // 2} "
+                f"it can ({limit}: about {limit // TREES_PER_WORLD}-{limit} "
                 "Worlds; Taichi never frees them): step other scenes of the same layout on a "
                 "World built before (World.reload), or build the rest in a new process"
             )

@@ -1017,7 +1017,7 @@ def test_a_world_past_taichis_field_trees_is_refused_with_a_clear_error(monkeypa
 
     scene = load_scenario("scenarios/two_squares.toml")
     monkeypatch.setattr(backend, "field_trees", lambda: backend.MAX_FIELD_TREES - 1)
-    # No World gone whose fields it could take (world.Engines): it needs new ones.
+    # No World gone whose fields it could take (engines.Engines): it needs new ones.
     monkeypatch.setattr(world_module, "ENGINES", world_module.Engines())
     with pytest.raises(UsageError, match=r"World\.reload.*new process"):
         World([scene])

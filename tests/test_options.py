@@ -189,7 +189,7 @@ def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
 
 def test_a_world_on_the_fields_of_one_gone_steps_as_one_on_new_fields(monkeypatch):
     """A World that is collected gives its fields and compiled stages to the next World of
-    its layout (``world.Engines``): that World runs, field for field, as one built on new
+    its layout (``engines.Engines``): that World runs, field for field, as one built on new
     fields at the same time (the first is still held then), here the rate-and-state sliding
     block after a run of it with other coefficients left its fields full."""
     from taichi_ice.engine import world as world_module

@@ -130,10 +130,10 @@ def test_a_world_starts_with_the_declared_values_in_every_field(taichi_runtime):
 
 
 def test_a_worlds_motion_is_its_four_fields_read_in_one_launch(taichi_runtime):
-    """``World.motion`` (one Transfer launch: a run's frames, and ``positions``,
-    ``angles``, ``velocities``, ``omegas``) gives what Taichi's ``to_numpy`` reads from the
-    four fields, bit for bit, after steps that moved and turned the bodies; and only the
-    scenes' bodies, not the capacity's."""
+    """``World.motion`` (one Transfer launch: a run's frames) gives what Taichi's
+    ``to_numpy`` reads from the four fields, and what the four readers give, bit for bit,
+    after steps that moved and turned the bodies; and only the scenes' bodies, not the
+    capacity's."""
     raw = copy.deepcopy(dict(load_scenario("scenarios/two_squares.toml").raw))
     raw["body"][0]["angle"] = 0.3  # a corner first: the collision turns both squares
     scene = scene_from_dict(raw)

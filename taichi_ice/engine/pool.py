@@ -173,7 +173,7 @@ class WorldPool:
     def release(self, key: tuple) -> bool:
         """Let go of one idle World whose kernels are ``key`` (``World.engine_key``), so that
         its fields and kernels pass to a World being built outside the pool
-        (``world.Engines``) instead of it compiling its own; False if there is none."""
+        (``engines.Engines``) instead of it compiling its own; False if there is none."""
         with self._lock:
             for e in self._entries:
                 if e.world.engine_key == key and e.free():
@@ -217,7 +217,7 @@ POOL = WorldPool()
 
 
 def _release_idle(key: tuple) -> bool:
-    """``world.Engines``'s ask before it builds a World anew: the process's pool (as it is
+    """``engines.Engines``'s ask before it builds a World anew: the process's pool (as it is
     now: tests put a pool of their own in its place) lets go of an idle World of ``key``."""
     return POOL.release(key)
 

@@ -6,7 +6,7 @@
 
 Taichi's ``field.from_numpy``, ``to_numpy`` and ``fill`` compile a kernel of their own for
 each field they touch (the field is the kernel's template argument), and a World has ~80
-fields: on a new set of fields (a new World, ``world.Engines``) the per-field kernels were
+fields: on a new set of fields (a new World, ``engines.Engines``) the per-field kernels were
 more of the compile time than the step's kernels (the test suite from an empty Taichi cache on
 2 cores: ~10,500 of them, 670 s of its 1,470 s of compiling, against 555 s for its 108
 thread-per-world steppers). ``Transfer`` copies every field of a set in one kernel, to or

@@ -481,25 +481,24 @@ class World:
             reader = self.readers[key] = Transfer(fields)
         return reader.read()
 
-    # The four readers take ``motion``'s one launch (and its one kernel a World, where each
-    # field's own ``to_numpy`` compiled one); each returns its part, having copied the
-    # other three fields too.
+    # One field each (Taichi's ``to_numpy``: a kernel per field and World, the cheapest
+    # call); a caller that wants all four takes ``motion``'s one launch.
 
     def positions(self) -> np.ndarray:
         """``(N, 2)`` centroids of every body of every world (m)."""
-        return self.motion()[0]
+        return self.data.body_pos.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def angles(self) -> np.ndarray:
         """``(N,)`` angles (rad)."""
-        return self.motion()[1]
+        return self.data.body_angle.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def velocities(self) -> np.ndarray:
         """``(N, 2)`` centroid velocities (m/s)."""
-        return self.motion()[2]
+        return self.data.body_vel.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def omegas(self) -> np.ndarray:
         """``(N,)`` angular velocities (rad/s)."""
-        return self.motion()[3]
+        return self.data.body_omega.to_numpy()[: self.batch.n_bodies].astype(np.float64)
 
     def take_probe_impulses(self) -> np.ndarray:
         """``(P, 2)`` contact impulse on each probe since the last call (N s); resets them."""

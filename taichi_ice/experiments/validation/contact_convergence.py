@@ -95,7 +95,7 @@ def pillar(laws=None, ratios=PILLAR_RATIOS, times=PILLAR_TIMES, *, default: floa
             rows.append(world.energies()[:, EnergyTerm.FRICTION].copy())
         world.check()
         energy[ratio] = np.asarray(rows)  # (times, laws)
-        del world  # gone before the next is built, whose kernels are its (world.Engines)
+        del world  # gone before the next is built, whose kernels are its (engines.Engines)
     ref = energy[min(ratios)]
     out: dict[str, Any] = {"ratios": list(ratios), "times_s": list(times), "laws": {}}
     for k, name in enumerate(laws):

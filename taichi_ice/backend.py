@@ -13,22 +13,32 @@ Compile time: Taichi compiles each kernel for its batch's layout on first use (c
 disk afterwards), in one of three settings (``TAICHI_ICE_OPTIMIZE`` in the environment, or
 ``init(optimize=...)``):
 
-- ``on`` (the default on the CPU, since 2026-11-28): Taichi's advanced IR passes (common
-  subexpressions, loop invariants, algebraic simplification) without its control-flow-graph
-  pass (``cfg_optimization``: store-to-load forwarding and dead stores over the whole
-  kernel), which took three quarters of a first compile and more. Measured on 2 cores, one
+- ``on`` (the default on the CPU): Taichi's advanced IR passes (algebraic simplification,
+  constant folding, loop invariants, dead code) without the two that scale worst with a
+  kernel's size: the control-flow-graph pass (``cfg_optimization``: store-to-load
+  forwarding and dead stores over the whole kernel; left out since 2026-11-28) and the
+  whole-kernel common-subexpression pass (``opt_level`` 0; left out since 2026-11-29),
+  which LLVM's own passes (O3, Taichi's fixed level) repeat. Measured on 2 cores, one
   sitting, each case a fresh process on an empty cache: the pillar scene's first step took
-  22.2-24.0 s with every pass (three runs), 5.1-5.4 s without that one, 3.8-4.5 s with no
-  advanced pass; with the coupled integrator 117 s, 17.8 s and 8.5 s. Stepping, kernels
-  loaded from the cache, alternating processes: the jammed pillar 35.4, 36.0 and 37.7 us a
-  step (means of five), the coupled step's 71.2, 75.0 and 73.9 us (four); a random box of
-  1,000 blocks 141, 153 and 157 us (nine, six, six); of 1e4 blocks stepped by the team
-  1087 and 1136 us (seven; the VM's run-to-run spread 25 %). Trajectories are the same bit
-  for bit in all three (``tests/test_backend.py``).
+  22.2-24.0 s with every pass (three runs), 5.1-5.4 s without the CFG pass, 3.8-4.5 s with
+  no advanced pass; with the coupled integrator 117 s, 17.8 s and 8.5 s. The CSE pass then
+  took most of what was left (2026-11-29, Taichi's scoped profiler: 8.9 s of the midstep
+  step's 15.5 s of compiling, 9,553 IR rewrites each scanning the kernel); without it,
+  before/after in ``docs/development.md`` ("Compile settings"). Stepping, kernels loaded
+  from the cache, alternating processes (2026-11-28): the jammed pillar 35.4, 36.0 and
+  37.7 us a step (means of five) for every pass, without CFG and without any advanced
+  pass, the coupled step's 71.2, 75.0 and 73.9 us (four); a random box of 1,000 blocks
+  141, 153 and 157 us (nine, six, six); of 1e4 blocks stepped by the team 1087 and 1136 us
+  (seven; the VM's run-to-run spread 25 %). With and without the CSE pass, two Worlds of
+  each case in one process, timed in alternating chunks (2026-11-29, medians of 40-60
+  paired ratios): the same within 2 % for the pillar (Euler, coupled and midstep steps) and
+  the team at 1e4, 4-8 % slower without it for 1,000 blocks a thread. Trajectories are the
+  same bit for bit in all settings (``tests/test_backend.py``).
 - ``full``: every advanced pass, the CFG one included (the default before; on GPU archs it
   stays the default, not measured there).
-- ``off`` (``0``): no advanced pass (the control-flow-graph pass once, after offloading,
-  as Taichi does without them). The test suite and the accuracy studies (``taichi-ice
+- ``off`` (``0``): no advanced pass (Taichi's basic simplification and dead-code passes
+  only; neither the control-flow-graph nor the CSE pass, which Taichi 1.7.4 runs only among
+  the advanced ones). The test suite and the accuracy studies (``taichi-ice
   validate``, but its speed study) compile this way.
 """
 
@@ -396,11 +406,17 @@ def init(
             # compiled one way are never loaded for the other.
             advanced_optimization=advanced,
             # The control-flow-graph pass: "on" leaves it out, most of a first compile with
-            # the advanced passes, which run it to a fixed point (module docstring). Without
-            # them ("off") Taichi runs it once after offloading, as it always has here (left
-            # out there too, the same compile time and the coupled step ~5 % slower, two
-            # pairs). The cache keys kernels by it (checked: compiled anew without it).
+            # the advanced passes, which run it in the first round of their loop (module
+            # docstring). Taichi 1.7.4 calls it nowhere else (``simplify.cpp``), so "off"
+            # never runs it; the flag stays as it was there, and so do the cache's keys of
+            # kernels compiled before (the cache keys kernels by it: checked).
             cfg_optimization=level != "on",
+            # The whole-kernel common-subexpression pass, which the advanced passes run in
+            # every round of their loop at ``opt_level`` > 0 (the CFG pass too; Taichi's
+            # passes read the level nowhere else): "on" leaves it out, 58 % of the midstep
+            # step's compile (module docstring). "off" never runs it. The cache keys
+            # kernels by the level.
+            opt_level=0 if level == "on" else 1,
             offline_cache=True,
             # Taichi's default cache holds 100 MB and, past it, drops the least recently used
             # quarter when a process ends. Kernels specialise on their batch's layout, and

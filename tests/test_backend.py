@@ -2,15 +2,15 @@
 
 The suite compiles without Taichi's advanced passes (``TAICHI_ICE_OPTIMIZE=0``,
 ``conftest.py``), as do the accuracy studies (``validate``); users' runs compile with them
-but the control-flow-graph pass ("on", the default), or with every pass ("full"; the
-default before 2026-11-28, and on GPU archs). This holds the three against each other bit
-for bit, in fresh processes (Taichi's settings are per process), on both ways of stepping:
-a world a thread (the pillar scene with rate-and-state friction through its jam, with the
-default step and the coupled one) and bodies in parallel (a box of 300 diamonds at random
-angles and velocities), the latter both by a team of threads in one launch and by a kernel
-per stage and step. The "full" process leaves out the coupled step, whose kernels take
-that setting ~2 minutes to compile on 2 cores (the same bits were checked here with it
-while "full" was the default).
+but the control-flow-graph and whole-kernel common-subexpression passes ("on", the
+default), or with every pass ("full"; the default before 2026-11-28, and on GPU archs).
+This holds the three against each other bit for bit, in fresh processes (Taichi's settings
+are per process), on both ways of stepping: a world a thread (the pillar scene with rate-
+and-state friction through its jam, with the default step and the coupled one) and bodies in
+parallel (a box of 300 diamonds at random angles and velocities), the latter both by a team
+of threads in one launch and by a kernel per stage and step. The "full" process leaves out
+the coupled step, whose kernels take that setting ~2 minutes to compile on 2 cores (the same
+bits were checked here with it while "full" was the default).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from taichi_ice.engine.world import World
 
 backend.init("cpu", "f64")
 cfg = impl.current_cfg()
-print("ADVANCED", cfg.advanced_optimization, cfg.cfg_optimization)
+print("ADVANCED", cfg.advanced_optimization, cfg.cfg_optimization, cfg.opt_level)
 parts = sys.argv[1:]
 def digest(w):
     return hashlib.sha1(
@@ -92,8 +92,8 @@ def test_optimised_and_fast_compiled_kernels_step_the_same():
     # The processes side by side: compiling is most of their time.
     procs = _start("0", "coupled"), _start("1", "coupled"), _start("full")
     fast, on, full = (_result(p) for p in procs)
-    assert fast["ADVANCED"] == "False True"
-    assert on["ADVANCED"] == "True False" and full["ADVANCED"] == "True True"
+    assert fast["ADVANCED"] == "False True 1"
+    assert on["ADVANCED"] == "True False 0" and full["ADVANCED"] == "True True 1"
     contacts = int(on["BOX"].split()[1])
     assert contacts > 20  # blocks are colliding: the narrow phase worked on many pairs
     assert int(on["PILLAR"].split()[1]) > 20  # blocks pressed on the pillar and each other

@@ -23,8 +23,10 @@ disk afterwards), in one of three settings (``TAICHI_ICE_OPTIMIZE`` in the envir
   22.2-24.0 s with every pass (three runs), 5.1-5.4 s without the CFG pass, 3.8-4.5 s with
   no advanced pass; with the coupled integrator 117 s, 17.8 s and 8.5 s. The CSE pass then
   took most of what was left (2026-11-29, Taichi's scoped profiler: 8.9 s of the midstep
-  step's 15.5 s of compiling, 9,553 IR rewrites each scanning the kernel); without it,
-  before/after in ``docs/development.md`` ("Compile settings"). Stepping, kernels loaded
+  step's 15.5 s of compiling, 9,553 IR rewrites each scanning the kernel); without it the
+  pillar's first step with the coupled step took 7.2-9.2 s against 20.6-21.8 s, with the
+  Euler step 3.4-4.8 s against 4.7-5.9 s (``benchmarks/README.md``, compile_reuse.py,
+  2026-11-29). Stepping, kernels loaded
   from the cache, alternating processes (2026-11-28): the jammed pillar 35.4, 36.0 and
   37.7 us a step (means of five) for every pass, without CFG and without any advanced
   pass, the coupled step's 71.2, 75.0 and 73.9 us (four); a random box of 1,000 blocks

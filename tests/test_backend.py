@@ -5,12 +5,12 @@ The suite compiles without Taichi's advanced passes (``TAICHI_ICE_OPTIMIZE=0``,
 but the control-flow-graph and whole-kernel common-subexpression passes ("on", the
 default), or with every pass ("full"; the default before 2026-11-28, and on GPU archs).
 This holds the three against each other bit for bit, in fresh processes (Taichi's settings
-are per process), on both ways of stepping: a world a thread (the pillar scene with rate-
-and-state friction through its jam, with the default step and the coupled one) and bodies in
-parallel (a box of 300 diamonds at random angles and velocities), the latter both by a team
-of threads in one launch and by a kernel per stage and step. The "full" process leaves out
-the coupled step, whose kernels take that setting ~2 minutes to compile on 2 cores (the same
-bits were checked here with it while "full" was the default).
+are per process), on both ways of stepping: a world a thread (the pillar scene with
+rate-and-state friction through its jam, with the default step and the coupled one) and
+bodies in parallel (a box of 300 diamonds at random angles and velocities), the latter both
+by a team of threads in one launch and by a kernel per stage and step. The "full" process
+leaves out the coupled step, whose kernels take that setting ~2 minutes to compile on 2
+cores (the same bits were checked here with it while "full" was the default).
 """
 
 from __future__ import annotations

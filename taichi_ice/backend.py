@@ -34,7 +34,8 @@ disk afterwards), in one of three settings (``TAICHI_ICE_OPTIMIZE`` in the envir
   (seven; the VM's run-to-run spread 25 %). With and without the CSE pass, two Worlds of
   each case in one process, timed in alternating chunks (2026-11-29, medians of 40-60
   paired ratios): the same within 2 % for the pillar (Euler, coupled and midstep steps) and
-  the team at 1e4, 4-8 % slower without it for 1,000 blocks a thread. Trajectories are the
+  the team at 1e4; for 1,000 blocks a thread 0.98-1.08 (four sets of pairs), within the
+  VM's noise. Trajectories are the
   same bit for bit in all settings (``tests/test_backend.py``).
 - ``full``: every advanced pass, the CFG one included (the default before; on GPU archs it
   stays the default, not measured there).

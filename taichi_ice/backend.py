@@ -15,30 +15,37 @@ disk afterwards), in one of three settings (``TAICHI_ICE_OPTIMIZE`` in the envir
 
 - ``on`` (the default on the CPU): Taichi's advanced IR passes (algebraic simplification,
   constant folding, loop invariants, dead code) without the two that scale worst with a
-  kernel's size: the control-flow-graph pass (``cfg_optimization``: store-to-load
-  forwarding and dead stores over the whole kernel; left out since 2026-11-28) and the
-  whole-kernel common-subexpression pass (``opt_level`` 0; left out since 2026-11-29),
-  which LLVM's own passes (O3, Taichi's fixed level) repeat. Measured on 2 cores, one
-  sitting, each case a fresh process on an empty cache: the pillar scene's first step took
-  22.2-24.0 s with every pass (three runs), 5.1-5.4 s without the CFG pass, 3.8-4.5 s with
-  no advanced pass; with the coupled integrator 117 s, 17.8 s and 8.5 s. The CSE pass then
-  took most of what was left (2026-11-29, Taichi's scoped profiler: 8.9 s of the midstep
-  step's 15.5 s of compiling, 9,553 IR rewrites each scanning the kernel); without it the
-  pillar's first step with the coupled step took 7.2-9.2 s against 20.6-21.8 s, with the
-  Euler step 3.4-4.8 s against 4.7-5.9 s (``benchmarks/README.md``, compile_reuse.py,
-  2026-11-29). Stepping, kernels loaded
-  from the cache, alternating processes (2026-11-28): the jammed pillar 35.4, 36.0 and
-  37.7 us a step (means of five) for every pass, without CFG and without any advanced
-  pass, the coupled step's 71.2, 75.0 and 73.9 us (four); a random box of 1,000 blocks
-  141, 153 and 157 us (nine, six, six); of 1e4 blocks stepped by the team 1087 and 1136 us
-  (seven; the VM's run-to-run spread 25 %). With and without the CSE pass, two Worlds of
-  each case in one process, timed in alternating chunks (2026-11-29, medians of 40-60
-  paired ratios): the same within 2 % for the pillar (Euler, coupled and midstep steps) and
-  the team at 1e4; for 1,000 blocks a thread 0.98-1.08 (four sets of pairs), within the
-  VM's noise. Trajectories are the
-  same bit for bit in all settings (``tests/test_backend.py``).
-- ``full``: every advanced pass, the CFG one included (the default before; on GPU archs it
-  stays the default, not measured there).
+  kernel's size: the control-flow-graph pass (``cfg_optimization``: store-to-load forwarding
+  and dead stores over the whole kernel; left out since 2026-11-28) and the whole-kernel
+  common-subexpression pass (``opt_level`` 0; left out since 2026-11-29). Measured on 2
+  cores, one sitting, each case a fresh process on an empty cache: the pillar scene's first
+  step took 22.2-24.0 s with every pass (three runs), 5.1-5.4 s without the CFG pass,
+  3.8-4.5 s with no advanced pass; with the coupled integrator 117 s, 17.8 s and 8.5 s. The
+  CSE pass then took most of what was left (2026-11-29, Taichi's scoped profiler: 8.9 s of
+  the midstep step's 15.5 s of compiling, 9,553 IR rewrites each scanning the kernel);
+  without it the pillar's first step with the coupled step took 7.2-9.2 s against 20.6-21.8
+  s, with the Euler step 3.4-4.8 s against 4.7-5.9 s (``benchmarks/README.md``). What it
+  costs a step (``benchmarks/compile_settings.py``, 2026-11-29: the settings' Worlds in one
+  process, stepped in alternating chunks, medians of 30 rounds' ratios;
+  ``results/cpu-2core-compile_settings.*``): "on" and "off" step alike, and every pass
+  ("full") steps 8-10 % faster: on/full 1.10 for the pillar with rate and state before its
+  jam, 1.09 with the coupled step, 1.08 for a box of 1e4 blocks stepped by the team;
+  off/full 1.10, 1.11, 1.08; first steps from an empty cache 4.9-5.5 s (on and off) against
+  27.0-29.5 s (full), 8.2-9.1 against 110-116 s, 6.7-7.3 against 21-23 s. The CSE pass alone
+  moves no step beyond the VM's noise (pairs without it over with it: 0.98-1.08). So "on"
+  pays for runs of minutes: a run that steps one layout for more than about 5 minutes (the
+  pillar's extra 22 s of compiling over 8 % of its steps) is faster with
+  ``TAICHI_ICE_OPTIMIZE=full``, once per layout (the offline cache keeps it). Trajectories
+  are the same bit for bit in all settings (``tests/test_backend.py``; the paired Worlds
+  too).
+- ``full``: every advanced pass, the CFG and CSE ones included (the default before
+  2026-11-28 on the CPU; on GPU archs it stays the default, where runs are long and the
+  CPU's steps are 8-10 % faster with it; a GPU's not measured). Taichi's passes run on the
+  host whatever the arch: on Vulkan (lavapipe, Mesa's software driver; 2026-11-29, one run
+  each, fresh processes, empty caches) the pillar's first step took 37.6 s with it and 7.9 s
+  with "on" (Euler, a thread per world), 16.0 and 5.5 s (a kernel per stage), 124.7 and 18.2
+  s (the coupled step). ``benchmarks/compile_settings.py --arch cuda`` measures both sides
+  on a GPU.
 - ``off`` (``0``): no advanced pass (Taichi's basic simplification and dead-code passes
   only; neither the control-flow-graph nor the CSE pass, which Taichi 1.7.4 runs only among
   the advanced ones). The test suite and the accuracy studies (``taichi-ice
@@ -76,6 +83,20 @@ _OPTIMIZE_NAMES = {
     "off": ("0", "false", "no", "off"),
     "on": ("1", "true", "yes", "on"),
     "full": ("full",),
+}
+# Taichi's compile options of each setting (module docstring), passed to ``ti.init``.
+# ``advanced_optimization``: the advanced IR passes. ``cfg_optimization``: their
+# control-flow-graph pass, run in the first round of their loop; Taichi 1.7.4 calls it
+# nowhere else (``simplify.cpp``), so "off" never runs it, and keeps the flag as it was
+# (the cache's keys of kernels compiled before). ``opt_level``: 0 leaves out their
+# whole-kernel common-subexpression pass (and the CFG one; Taichi's passes read the level
+# nowhere else). Taichi's offline cache keys kernels by all three (checked), so kernels
+# compiled one way are never loaded for another. They are fields of Taichi's config, read
+# when a kernel compiles (``benchmarks/compile_settings.py`` sets them per World).
+COMPILE_OPTIONS = {
+    "off": {"advanced_optimization": False, "cfg_optimization": True, "opt_level": 1},
+    "on": {"advanced_optimization": True, "cfg_optimization": False, "opt_level": 0},
+    "full": {"advanced_optimization": True, "cfg_optimization": True, "opt_level": 1},
 }
 
 # The line ti.init prints unconditionally (taichi/lang/misc.py, a plain print to stdout).
@@ -397,7 +418,6 @@ def init(
     import taichi as ti
 
     level = optimize_level(optimize, arch)
-    advanced = level != "off"
     use_fast_positions()
     with _quiet_start():
         ti.init(
@@ -405,21 +425,7 @@ def init(
             default_fp=taichi_dtype(precision),
             default_ip=ti.i32,
             log_level=ti.WARN,
-            # Taichi's offline cache keys kernels by this setting (checked), so kernels
-            # compiled one way are never loaded for the other.
-            advanced_optimization=advanced,
-            # The control-flow-graph pass: "on" leaves it out, most of a first compile with
-            # the advanced passes, which run it in the first round of their loop (module
-            # docstring). Taichi 1.7.4 calls it nowhere else (``simplify.cpp``), so "off"
-            # never runs it; the flag stays as it was there, and so do the cache's keys of
-            # kernels compiled before (the cache keys kernels by it: checked).
-            cfg_optimization=level != "on",
-            # The whole-kernel common-subexpression pass, which the advanced passes run in
-            # every round of their loop at ``opt_level`` > 0 (the CFG pass too; Taichi's
-            # passes read the level nowhere else): "on" leaves it out, 58 % of the midstep
-            # step's compile (module docstring). "off" never runs it. The cache keys
-            # kernels by the level.
-            opt_level=0 if level == "on" else 1,
+            **COMPILE_OPTIONS[level],
             offline_cache=True,
             # Taichi's default cache holds 100 MB and, past it, drops the least recently used
             # quarter when a process ends. Kernels specialise on their batch's layout, and

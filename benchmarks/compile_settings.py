@@ -38,7 +38,6 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = ("off", "on", "full")
 CASES = ("pillar-euler", "pillar-coupled", "box")
 
@@ -181,9 +180,8 @@ def main(argv=None) -> int:
                         f"same bits: {s['same_bits_as_full']}",
                         flush=True,
                     )
-    git = subprocess.run(
-        ["git", "-C", str(ROOT), "describe", "--always", "--dirty"], capture_output=True, text=True
-    ).stdout.strip()
+    from taichi_ice.provenance import git_describe
+
     record = {
         "arch": args.arch,
         "blocks": args.blocks,
@@ -191,7 +189,7 @@ def main(argv=None) -> int:
         "pairs": args.pairs,
         "machine": platform.platform(),
         "cpus": os.cpu_count(),
-        "git": git,
+        "git": git_describe(),
         "compile": compile_rows,
         "stepping": stepping_rows,
     }

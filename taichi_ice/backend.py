@@ -27,10 +27,11 @@ disk afterwards), in one of three settings (``TAICHI_ICE_OPTIMIZE`` in the envir
   s, with the Euler step 3.4-4.8 s against 4.7-5.9 s (``benchmarks/README.md``). What it
   costs a step (``benchmarks/compile_settings.py``, 2026-11-29: the settings' Worlds in one
   process, stepped in alternating chunks, medians of 30 rounds' ratios;
-  ``results/cpu-2core-compile_settings.*``): "on" and "off" step alike, and every pass
-  ("full") steps 8-10 % faster: on/full 1.10 for the pillar with rate and state before its
-  jam, 1.09 with the coupled step, 1.08 for a box of 1e4 blocks stepped by the team;
-  off/full 1.10, 1.11, 1.08; first steps from an empty cache 4.9-5.5 s (on and off) against
+  ``results/cpu-2core-compile_settings*``): "on" steps as "off" does or a few per cent
+  faster, and every pass ("full") steps 4-10 % faster: on/full 1.10 and 1.08 (two runs) for
+  the pillar with rate and state before its jam, 1.09 and 1.10 with the coupled step, 1.08
+  and 1.04 for a box of 1e4 blocks stepped by the team; off/full 1.10 and 1.11, 1.11 and
+  1.15, 1.08 and 1.06; first steps from an empty cache 4.9-5.5 s (on and off) against
   27.0-29.5 s (full), 8.2-9.1 against 110-116 s, 6.7-7.3 against 21-23 s. The CSE pass alone
   moves no step beyond the VM's noise (pairs without it over with it: 0.98-1.08). So "on"
   pays for runs of minutes: a run that steps one layout for more than about 5 minutes (the
@@ -40,7 +41,7 @@ disk afterwards), in one of three settings (``TAICHI_ICE_OPTIMIZE`` in the envir
   too).
 - ``full``: every advanced pass, the CFG and CSE ones included (the default before
   2026-11-28 on the CPU; on GPU archs it stays the default, where runs are long and the
-  CPU's steps are 8-10 % faster with it; a GPU's not measured). Taichi's passes run on the
+  CPU's steps are 4-10 % faster with it; a GPU's not measured). Taichi's passes run on the
   host whatever the arch: on Vulkan (lavapipe, Mesa's software driver; 2026-11-29, one run
   each, fresh processes, empty caches) the pillar's first step took 37.6 s with it and 7.9 s
   with "on" (Euler, a thread per world), 16.0 and 5.5 s (a kernel per stage), 124.7 and 18.2

@@ -42,7 +42,7 @@ SETTINGS = ("off", "on", "full")
 CASES = ("pillar-euler", "pillar-coupled", "box")
 
 
-def make_world(case: str, arch: str, blocks: int):
+def make_world(case: str, blocks: int):
     """A World of ``case`` (the bench's random box is cached in the system's temp folder)."""
     from taichi_ice import load_scenario
     from taichi_ice.engine.world import World
@@ -64,7 +64,7 @@ def compile_worker(case: str, arch: str, blocks: int) -> dict:
 
     backend.init(arch)
     start = time.perf_counter()
-    world = make_world(case, arch, blocks)
+    world = make_world(case, blocks)
     world.advance(1)
     world.check()
     return {"first_step_s": time.perf_counter() - start, "setting": backend.compile_level()}
@@ -83,7 +83,7 @@ def stepping_worker(case: str, arch: str, blocks: int, warm: float, pairs: int) 
     for level in SETTINGS:
         for key, value in backend.COMPILE_OPTIONS[level].items():
             setattr(cfg, key, value)
-        world = worlds[level] = make_world(case, arch, blocks)
+        world = worlds[level] = make_world(case, blocks)
         # Warmed up in its own setting: a kernel first launched now compiles in it too.
         world.advance(int(warm / world.dt) if case != "box" else 50)
         world.check()
@@ -120,8 +120,12 @@ def _run(args, mode: str, case: str, env: dict) -> dict:
     ]  # fmt: skip
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if proc.returncode != 0:
-        raise RuntimeError(f"{mode} {case}: {proc.stderr[-2000:]}")
+        raise ChildFailed(f"the {mode} process of {case} failed:\n{proc.stderr[-2000:]}")
     return json.loads(proc.stdout.splitlines()[-1])
+
+
+class ChildFailed(Exception):
+    """A case's process ended with an error (its stderr's end is the message)."""
 
 
 def main(argv=None) -> int:
@@ -149,7 +153,21 @@ def main(argv=None) -> int:
     unknown = sorted(set(cases) - set(CASES))
     if unknown:
         ap.error(f"--cases: unknown {', '.join(unknown)}; choose from {', '.join(CASES)}")
-    args.out.mkdir(parents=True, exist_ok=True)
+    from taichi_ice import backend
+    from taichi_ice.errors import BackendError
+
+    try:
+        # Taichi falls back to the CPU where the arch is missing: the results would be the
+        # CPU's under the GPU's name. A child process tries the arch first.
+        args.arch = backend.probe(args.arch)
+        args.out.mkdir(parents=True, exist_ok=True)
+        return _measure(args, cases)
+    except (BackendError, ChildFailed) as e:
+        print(f"compile_settings: {e}", file=sys.stderr)
+        return 1
+
+
+def _measure(args, cases: list) -> int:
     compile_rows, stepping_rows = [], {}
     for r in range(args.repeat):
         for case in cases:

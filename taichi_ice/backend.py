@@ -381,6 +381,29 @@ def optimize_level(value=None, arch: str = "cpu") -> str:
     )
 
 
+def ask_optimize(value) -> str:
+    """Have this process's Taichi, and the processes it starts (a sweep's workers), compile
+    in the setting ``value`` names (``optimize_level``): sets ``TAICHI_ICE_OPTIMIZE``, which
+    ``init`` reads when it starts Taichi and child processes inherit. Returns the setting.
+
+    Raises:
+        BackendError: Taichi already runs in this process in another setting (fixed when it
+            starts), or ``value`` names none.
+    """
+    from .errors import BackendError
+
+    level = optimize_level(value)
+    running = compile_level()
+    if running is not None and running != level:
+        raise BackendError(
+            f"--optimize {level}: Taichi already runs in this process and compiles with "
+            f"'{running}' (fixed when it starts); run the command in a new process, or set "
+            f"{OPTIMIZE_ENV}={level} before Taichi starts"
+        )
+    os.environ[OPTIMIZE_ENV] = level
+    return level
+
+
 def init(
     arch: str = "cpu",
     precision: str = "f64",

@@ -178,3 +178,35 @@ def test_slots_help_says_what_a_slot_is_and_what_happens_past_it(capsys):
     slots = options[options.index("--slots N") : options.index("--integrator {")]
     assert "most contacts one body can hold at once" in slots
     assert "stops the run" in slots and "raise it" in slots
+
+
+def test_optimize_sets_a_new_taichis_setting_and_refuses_another_in_a_running_one(
+    monkeypatch, tmp_path, capsys
+):
+    """``--optimize`` becomes ``TAICHI_ICE_OPTIMIZE``, which ``backend.init`` reads when it
+    starts Taichi and a command's worker processes inherit; a process whose Taichi already
+    compiles in another setting (fixed when it starts) refuses it in one line, before any
+    file is written."""
+    import os
+
+    from taichi_ice import backend
+
+    running = backend.compile_level()  # the session's (tests/conftest.py)
+    other = "full" if running != "full" else "off"
+    monkeypatch.setenv(backend.OPTIMIZE_ENV, os.environ.get(backend.OPTIMIZE_ENV, ""))
+    out = tmp_path / "r.h5"
+    args = ["run", TWO_SQUARES, "--optimize", other, "--until", "0.001", "--out", str(out)]
+    assert main([*args, "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert f"--optimize {other}" in err and f"'{running}'" in err and "new process" in err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()
+    # As in a process that has not started Taichi: the option is the environment's setting.
+    monkeypatch.setattr(backend, "_level", None)
+    assert backend.ask_optimize(" FULL ") == "full"
+    assert os.environ[backend.OPTIMIZE_ENV] == "full"
+    assert backend.optimize_level() == "full"
+    # The parser takes the three settings only.
+    assert build_parser().parse_args(["run", TWO_SQUARES, "--optimize", "on"]).optimize == "on"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["run", TWO_SQUARES, "--optimize", "fast"])

@@ -27,7 +27,7 @@ from .args import (
     positive_int,
     slots_per_body,
 )
-from .help_text import ARCH_HELP, PRECISION_HELP, SLOTS_HELP, scene_help
+from .help_text import ARCH_HELP, OPTIMIZE_HELP, PRECISION_HELP, SLOTS_HELP, scene_help
 
 EXAMPLES = {
     "run": """examples:
@@ -254,6 +254,7 @@ def _engine_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--precision", default=None, choices=["f64", "f32"], help=PRECISION_HELP + "; default f64"
     )
+    p.add_argument("--optimize", default=None, choices=["off", "on", "full"], help=OPTIMIZE_HELP)
     p.add_argument(
         "--until",
         type=positive_float,
@@ -526,6 +527,8 @@ def main(argv: list[str] | None = None) -> int:
             # Unset: cpu and f64, or what Taichi already runs on when main is called in a
             # process that started it (a notebook, the GPU test lane).
             args.arch, args.precision = backend.resolve(args.arch, args.precision)
+            if getattr(args, "optimize", None):
+                backend.ask_optimize(args.optimize)
             running = backend.current()
             if args.arch != "cpu" and (running is None or running[0] != args.arch):
                 # In a child process: a GPU that crashes ti.init stays there.

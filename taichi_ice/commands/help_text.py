@@ -16,6 +16,13 @@ ARCH_HELP = (
     "CUDA, Vulkan or Metal), or one of cuda, vulkan, metal by name; one this machine lacks "
     "is refused before the run starts"
 )
+OPTIMIZE_HELP = (
+    "how much of Taichi's optimisation the kernels get: on (the default on the CPU: a first "
+    "run compiles in ~5-9 s on 2 cores), full (every pass, the default on GPUs: 21-116 s to "
+    "compile, then 4-10 %% faster a step on the CPU: for runs that step one scene for more "
+    "than ~5 min; the cache keeps the kernels for the next run) or off; the same results bit "
+    "for bit. Sets TAICHI_ICE_OPTIMIZE for this command and its workers"
+)
 PRECISION_HELP = (
     "floating-point type of the simulation state: f64 (64-bit) or f32 (32-bit: less memory "
     "and often faster on a GPU, with rounding near 1e-7 of each value, so the energy budget "

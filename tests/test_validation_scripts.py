@@ -7,6 +7,7 @@ copy, not the step). Its window statistics are held against direct sums, and
 """
 
 import importlib.util
+import json
 from pathlib import Path
 
 import numpy as np
@@ -92,6 +93,35 @@ def test_first_seed_gives_layouts_the_default_ones_do_not_share():
     assert fresh == list(range(1000, 1128)) and not set(fresh) & set(default)
     with pytest.raises(SystemExit):  # argparse's error: the option needs a variant
         jam_dt.main(["--out", "unused", "--first-seed", "1000"])
+
+
+def test_integrator_reaches_every_run_and_names_the_record(tmp_path, monkeypatch):
+    """``--integrator`` steps every layout of every step with that integrator and writes
+    ``..._INTEGRATOR.json`` saying so; without ``--slide-resolution`` it is refused. (The
+    ensemble is replaced by one that records its options: the runs are not the subject.)"""
+    import types
+
+    from taichi_ice.experiments import ensemble, metrics
+
+    jam_dt = _script("jam_dt")
+    asked = []
+
+    def fake_run_ensemble(scene, seeds, until, options):
+        asked.append((options.integrator, options.dt, len(seeds)))
+        row = {"peak_force": 1.0, "friction_energy": 2.0, "released": False}
+        series = [{"time": np.array([0.0, 1.0])} for _ in seeds]
+        return types.SimpleNamespace(series=series, metrics=[row] * len(seeds), status="ok")
+
+    monkeypatch.setattr(ensemble, "run_ensemble", fake_run_ensemble)
+    monkeypatch.setattr(metrics, "probe_force_magnitude", lambda s: np.zeros(2))
+    argv = ["--out", str(tmp_path), "--slide-resolution", "0.025", "--steps", "0.4,0.2"]
+    assert jam_dt.main([*argv, "--layouts", "3", "--integrator", "midstep"]) == 0
+    assert [(a[0], a[2]) for a in asked] == [("midstep", 3), ("midstep", 3)]
+    assert asked[0][1] == pytest.approx(2 * asked[1][1])  # 0.4 and 0.2 of one limit
+    record = json.loads((tmp_path / "jam_dt_slide_0.025_0.4_0.2_midstep.json").read_text())
+    assert record["integrator"] == "midstep" and record["steps"] == [0.4, 0.2]
+    with pytest.raises(SystemExit):  # argparse's error: the option needs the variant
+        jam_dt.main(["--out", "unused", "--integrator", "midstep"])
 
 
 def test_the_interface_events_are_counted_slot_by_slot():

@@ -31,7 +31,8 @@ part. Four measurements that can:
    ``jam_dt_slide_R.json`` (``jam_dt_slide_R_STEPS.json`` with ``--steps``, e.g. ``--steps
    0.0125`` for the finest step alone, ~35 minutes at ``--slide-resolution 0``). About 12
    minutes at 0.025. ``--first-seed N`` runs the layouts of seeds ``N, N + 1, ...`` instead
-   (``..._seedsN.json``): a second sample that shares no layout with the first. Each
+   (``..._seedsN.json``): a second sample that shares no layout with the first;
+   ``--integrator NAME`` steps them with another integrator (``..._NAME.json``). Each
    record keeps every layout's peak force, frictional energy and whether its jam was
    released (``experiments.metrics``).
 
@@ -123,7 +124,9 @@ def _seeds(scene, n: int, first: int | None = None) -> list[int]:
     return [own, *[s for s in range(n + 1) if s != own][: n - 1]]
 
 
-def _curves(scene, layouts: int, ratio: float, first: int | None = None) -> dict:
+def _curves(
+    scene, layouts: int, ratio: float, first: int | None = None, integrator: str = "euler"
+) -> dict:
     from taichi_ice.engine.options import Options
     from taichi_ice.experiments.ensemble import run_ensemble
     from taichi_ice.experiments.metrics import probe_force_magnitude
@@ -132,7 +135,8 @@ def _curves(scene, layouts: int, ratio: float, first: int | None = None) -> dict
     dt = dem_accuracy.field_step(ratio, scene.stable_dt)
     start = time.perf_counter()
     seeds = _seeds(scene, layouts, first)
-    ens = run_ensemble(scene, seeds, until=UNTIL, options=Options(dt=dt, force_dt=True))
+    options = Options(dt=dt, force_dt=True, integrator=integrator)
+    ens = run_ensemble(scene, seeds, until=UNTIL, options=options)
     return {
         "seeds": seeds,
         "time": np.asarray(ens.series[0]["time"]),
@@ -200,9 +204,18 @@ def main(argv=None) -> int:
         help="with --rule or --slide-resolution: the layouts' seeds from this one on, "
         "instead of the paper's layout and seeds 1, 2, ... (written to ..._seedsN.json)",
     )
+    parser.add_argument(
+        "--integrator",
+        choices=("euler", "analytic", "coupled", "midstep"),
+        default="euler",
+        help="with --slide-resolution: the runs' integrator (run --integrator; default euler), "
+        "written to ..._INTEGRATOR.json when not euler",
+    )
     args = parser.parse_args(argv)
     if args.first_seed is not None and args.rule is None and args.slide_resolution is None:
         parser.error("--first-seed goes with --rule or --slide-resolution")
+    if args.integrator != "euler" and args.slide_resolution is None:
+        parser.error("--integrator goes with --slide-resolution")
     from taichi_ice import backend
 
     backend.init("cpu", "f64")
@@ -317,11 +330,16 @@ def _variant(args, scene, key: str, value, tag: str) -> int:
     ``value``), written to ``jam_dt_TAG.json``."""
     steps = args.steps
     tag += "" if args.first_seed is None else f"_seeds{args.first_seed}"
-    runs = {ratio: _curves(scene, args.layouts, ratio, args.first_seed) for ratio in steps}
+    integrator = args.integrator
+    tag += "" if integrator == "euler" else f"_{integrator}"
+    runs = {
+        ratio: _curves(scene, args.layouts, ratio, args.first_seed, integrator) for ratio in steps
+    }
     peaks = [runs[r]["peak"] for r in steps]
     record = {
         key: value,
         "slide_resolution": scene.ice.slide_resolution,
+        "integrator": integrator,
         "steps": list(steps),
         "layouts": args.layouts,
         "seeds": runs[steps[0]]["seeds"],

@@ -120,6 +120,7 @@ def test_integrator_reaches_every_run_and_names_the_record(tmp_path, monkeypatch
     assert asked[0][1] == pytest.approx(2 * asked[1][1])  # 0.4 and 0.2 of one limit
     record = json.loads((tmp_path / "jam_dt_slide_0.025_0.4_0.2_midstep.json").read_text())
     assert record["integrator"] == "midstep" and record["steps"] == [0.4, 0.2]
+    assert "git" in record  # the revision that ran it (None outside a git checkout)
     with pytest.raises(SystemExit):  # argparse's error: the option needs the variant
         jam_dt.main(["--out", "unused", "--integrator", "midstep"])
 

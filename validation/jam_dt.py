@@ -328,6 +328,8 @@ def main(argv=None) -> int:
 def _variant(args, scene, key: str, value, tag: str) -> int:
     """4. and 5.: the peak force at ``args.steps`` of a variant of the scene (``key`` =
     ``value``), written to ``jam_dt_TAG.json``."""
+    from taichi_ice.provenance import git_describe
+
     steps = args.steps
     tag += "" if args.first_seed is None else f"_seeds{args.first_seed}"
     integrator = args.integrator
@@ -350,6 +352,7 @@ def _variant(args, scene, key: str, value, tag: str) -> int:
         "released": [runs[r]["released"].tolist() for r in steps],
         "wall_s": [runs[r]["wall_s"] for r in steps],
         "status": [runs[r]["status"] for r in steps],
+        "git": git_describe(),
     }
     print(f"peak force with {key} {value} over {args.layouts} layouts:")
     for r, p in zip(steps, peaks):

@@ -97,8 +97,9 @@ def test_first_seed_gives_layouts_the_default_ones_do_not_share():
 
 def test_integrator_reaches_every_run_and_names_the_record(tmp_path, monkeypatch):
     """``--integrator`` steps every layout of every step with that integrator and writes
-    ``..._INTEGRATOR.json`` saying so; without ``--slide-resolution`` it is refused. (The
-    ensemble is replaced by one that records its options: the runs are not the subject.)"""
+    ``..._INTEGRATOR.json`` saying so; without ``--rule`` or ``--slide-resolution`` it is
+    refused. (The ensemble is replaced by one that records its options: the runs are not the
+    subject.)"""
     import types
 
     from taichi_ice.experiments import ensemble, metrics

@@ -32,7 +32,8 @@ part. Four measurements that can:
    0.0125`` for the finest step alone, ~35 minutes at ``--slide-resolution 0``). About 12
    minutes at 0.025. ``--first-seed N`` runs the layouts of seeds ``N, N + 1, ...`` instead
    (``..._seedsN.json``): a second sample that shares no layout with the first;
-   ``--integrator NAME`` steps them with another integrator (``..._NAME.json``). Each
+   ``--integrator NAME`` steps them (and those of 4.) with another integrator
+   (``..._NAME.json``). Each
    record keeps every layout's peak force, frictional energy and whether its jam was
    released (``experiments.metrics``).
 
@@ -208,14 +209,14 @@ def main(argv=None) -> int:
         "--integrator",
         choices=("euler", "analytic", "coupled", "midstep"),
         default="euler",
-        help="with --slide-resolution: the runs' integrator (run --integrator; default euler), "
-        "written to ..._INTEGRATOR.json when not euler",
+        help="with --rule or --slide-resolution: the runs' integrator (run --integrator; "
+        "default euler), written to ..._INTEGRATOR.json when not euler",
     )
     args = parser.parse_args(argv)
     if args.first_seed is not None and args.rule is None and args.slide_resolution is None:
         parser.error("--first-seed goes with --rule or --slide-resolution")
-    if args.integrator != "euler" and args.slide_resolution is None:
-        parser.error("--integrator goes with --slide-resolution")
+    if args.integrator != "euler" and args.rule is None and args.slide_resolution is None:
+        parser.error("--integrator goes with --rule or --slide-resolution")
     from taichi_ice import backend
 
     backend.init("cpu", "f64")

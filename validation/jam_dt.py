@@ -33,9 +33,8 @@ part. Four measurements that can:
    minutes at 0.025. ``--first-seed N`` runs the layouts of seeds ``N, N + 1, ...`` instead
    (``..._seedsN.json``): a second sample that shares no layout with the first;
    ``--integrator NAME`` steps them (and those of 4.) with another integrator
-   (``..._NAME.json``). Each
-   record keeps every layout's peak force, frictional energy and whether its jam was
-   released (``experiments.metrics``).
+   (``..._NAME.json``). Each record keeps every layout's peak force, frictional energy and
+   whether its jam was released (``experiments.metrics``), and the ``git describe`` it ran.
 
 Writes ``jam_dt.json`` and ``jam_dt.png`` and prints the tables (docs/accuracy.md quotes
 them). About 25 minutes on 2 cores at the defaults; ``--layouts 8 --branch-layouts 4`` for a
@@ -53,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from taichi_ice.codes import RestRule
+from taichi_ice.engine.options import INTEGRATORS
 
 STEPS = (0.2, 0.05)  # dt / stable_dt: the default and its quarter
 THRESHOLDS = (1e4, 1e5, 5e5, 1e6)  # N: the jam's onset and growth
@@ -207,7 +207,7 @@ def main(argv=None) -> int:
     )
     parser.add_argument(
         "--integrator",
-        choices=("euler", "analytic", "coupled", "midstep"),
+        choices=INTEGRATORS,
         default="euler",
         help="with --rule or --slide-resolution: the runs' integrator (run --integrator; "
         "default euler), written to ..._INTEGRATOR.json when not euler",

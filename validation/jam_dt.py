@@ -213,10 +213,11 @@ def main(argv=None) -> int:
         "default euler), written to ..._INTEGRATOR.json when not euler",
     )
     args = parser.parse_args(argv)
-    if args.first_seed is not None and args.rule is None and args.slide_resolution is None:
-        parser.error("--first-seed goes with --rule or --slide-resolution")
-    if args.integrator != "euler" and args.rule is None and args.slide_resolution is None:
-        parser.error("--integrator goes with --rule or --slide-resolution")
+    variant = args.rule is not None or args.slide_resolution is not None
+    for option, given in (("--first-seed", args.first_seed is not None),
+                          ("--integrator", args.integrator != "euler")):  # fmt: skip
+        if given and not variant:
+            parser.error(f"{option} goes with --rule or --slide-resolution")
     from taichi_ice import backend
 
     backend.init("cpu", "f64")
@@ -335,9 +336,7 @@ def _variant(args, scene, key: str, value, tag: str) -> int:
     tag += "" if args.first_seed is None else f"_seeds{args.first_seed}"
     integrator = args.integrator
     tag += "" if integrator == "euler" else f"_{integrator}"
-    runs = {
-        ratio: _curves(scene, args.layouts, ratio, args.first_seed, integrator) for ratio in steps
-    }
+    runs = {r: _curves(scene, args.layouts, r, args.first_seed, integrator) for r in steps}
     peaks = [runs[r]["peak"] for r in steps]
     record = {
         key: value,

@@ -148,6 +148,52 @@ def test_budget_residual_and_breach_on_hand_made_terms():
     assert budget.SERIES[EnergyTerm.FRICTION] == "friction_energy"
 
 
+SIZES = ("n_bodies", "n_local_verts", "n_probes", "n_small", "n_large", "slots", "nbr_len",
+         "hash_size")  # fmt: skip
+
+
+def _squares(n: int, walls: bool = False):
+    """``n`` unit squares on a 2 m grid, at rest; four walls around them if ``walls``."""
+    side = int(np.ceil(np.sqrt(n)))
+    body = [
+        {"name": f"s{k}", "shape": "rectangle", "width": 1.0, "length": 1.0,
+         "position": [2.0 * (k % side), 2.0 * (k // side)]}
+        for k in range(n)
+    ]  # fmt: skip
+    if walls:
+        far = 2.0 * side + 1.0
+        for name, (x, y, w, h) in {
+            "south": (far / 2 - 1, -2, far + 2, 1), "north": (far / 2 - 1, far, far + 2, 1),
+            "west": (-2, far / 2 - 1, 1, far + 2), "east": (far, far / 2 - 1, 1, far + 2),
+        }.items():  # fmt: skip
+            body.append({"name": name, "shape": "rectangle", "width": w, "length": h,
+                         "position": [x, y], "kind": "fixed"})  # fmt: skip
+    raw = {"simulation": {"duration": 1.0}, "ice": {"density": 920.0, "thickness": 0.3},
+           "friction": {"law": "coulomb", "mu": 0.5}, "body": body}  # fmt: skip
+    return scene_from_dict(raw)
+
+
+def test_every_scene_of_up_to_256_bodies_compiles_for_the_same_sizes():
+    """Small scenes share one set of sizes (``assemble.CAPACITY_FLOORS``, and the slots of a
+    scene with walls, ``options.BODY_FLOOR``), so a user's edits and a sweep over layouts of up
+    to 256 floes compile once (for each largest outline: 4, 8 or 16 vertices, a switch of the
+    kernels): every bundled scene (2 to 67 bodies, walls or none), squares by the hundred with
+    and without walls; past 256 bodies, the next power of two, and the
+    slots its walls ask (six without, eight with four)."""
+    from taichi_ice.engine.options import BODY_FLOOR, DEFAULT_SMALL_SLOTS, LARGE_SLOTS
+
+    scenes = [load_scenario(p) for p in sorted((ROOT / "scenarios").glob("*.toml"))]
+    scenes += [_squares(1), _squares(BODY_FLOOR - 4, walls=True), _squares(BODY_FLOOR)]
+    sizes = {tuple(getattr(assemble([s]).layout, k) for k in SIZES) for s in scenes}
+    assert len(sizes) == 1, sizes
+    (first,) = sizes
+    assert dict(zip(SIZES, first))["n_bodies"] == BODY_FLOOR
+    assert dict(zip(SIZES, first))["slots"] == DEFAULT_SMALL_SLOTS + LARGE_SLOTS
+    bare, walled = assemble([_squares(300)]).layout, assemble([_squares(300, walls=True)]).layout
+    assert (bare.n_bodies, walled.n_bodies) == (512, 512)
+    assert (bare.slots, walled.slots) == (DEFAULT_SMALL_SLOTS, DEFAULT_SMALL_SLOTS + LARGE_SLOTS)
+
+
 def test_the_sizes_compiled_are_capacities_and_the_host_arrays_the_scenes_counts():
     """A layout's sizes are capacities: powers of two (with a floor) up to 4096, then
     multiples of a power of two 8-16 times below the count, never below it and never more
@@ -168,9 +214,9 @@ def test_the_sizes_compiled_are_capacities_and_the_host_arrays_the_scenes_counts
     scene = load_scenario(ROOT / "scenarios" / "two_squares.toml")
     batch = assemble([scene, scene, scene])
     assert (batch.n_bodies, batch.real.n_worlds, batch.n_probes) == (6, 3, 3)
-    assert (batch.layout.n_bodies, batch.layout.n_worlds, batch.layout.n_probes) == (8, 8, 4)
+    assert (batch.layout.n_bodies, batch.layout.n_worlds, batch.layout.n_probes) == (256, 8, 8)
     assert batch.layout.max_verts == 4 and batch.host.body_mass.shape == (6,)
     edges = padded(batch.host.world_body_start, var("world_body_start"), batch.layout)
     assert edges.tolist() == [0, 2, 4, 6, 6, 6, 6, 6, 6]
     mass = padded(batch.host.body_mass, var("body_mass"), batch.layout)
-    assert mass.tolist() == [*batch.host.body_mass.tolist(), 0.0, 0.0]
+    assert mass.tolist() == [*batch.host.body_mass.tolist(), *[0.0] * 250]

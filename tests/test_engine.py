@@ -891,7 +891,7 @@ def test_worlds_of_other_stiffness_share_a_batch_and_its_kernels(f64, stepping):
     del batch  # a world alone has its layout: it takes its kernels
     for w, scene in enumerate((soft, stiff)):
         one = World([scene], dt=dt, stepping=stepping)
-        # The batch's counts are within the lone world's capacities (8 bodies, 4 probes,
+        # The batch's counts are within the lone world's capacities (256 bodies, 8 probes,
         # 8 worlds): the same layout.
         assert one.layout == layout
         one.advance(steps)

@@ -159,10 +159,10 @@ def _with_squares(scene, n: int):
 
 
 def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
-    """The sizes a World compiles for are capacities (``assemble.capacity``: 8 bodies at
+    """The sizes a World compiles for are capacities (``assemble.capacity``: 256 bodies at
     least): two squares, then the same scene with three more, run on one World (built once,
     reloaded once), and the second run is, field for field (the unused rows too), that of a
-    World built for it; ten more (12 bodies) need another layout."""
+    World built for it; 260 more (262 bodies) need another layout."""
     from taichi_ice.engine.assemble import assemble
     from taichi_ice.engine.world import World
     from taichi_ice.run.simulation import Simulation
@@ -170,7 +170,8 @@ def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
     base = load_scenario("two_squares")
     five = _with_squares(base, 3)
     assert assemble([five]).layout == assemble([base]).layout
-    assert assemble([_with_squares(base, 10)]).layout.n_bodies == 16
+    assert assemble([_with_squares(base, 10)]).layout == assemble([base]).layout
+    assert assemble([_with_squares(base, 260)]).layout.n_bodies == 512
     first = Simulation(base)
     first.run(until=0.3)  # past the collision: the fields hold a contact's leftovers
     del first

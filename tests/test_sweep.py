@@ -293,8 +293,8 @@ def test_a_reloaded_world_steps_bit_for_bit_as_a_new_one():
 def test_the_batches_of_a_layout_share_one_world_in_a_process(sweep_dir, monkeypatch):
     """A sweep run in one process builds one World (one compilation of the kernels) for
     all its batches of one layout: batches of 3, 3 and 2 (padded to 3) build one World and
-    reload it twice; the same sweep in batches of 4, within the capacity of that World (4
-    worlds, 8 bodies: ``assemble.capacity``), reloads it twice more and gives the same
+    reload it twice; the same sweep in batches of 4, within the capacity of that World (8
+    worlds, 256 bodies: ``assemble.capacity``), reloads it twice more and gives the same
     dataset, value for value."""
     from taichi_ice.engine import pool as pool_module
     from taichi_ice.engine.world import World
@@ -403,17 +403,19 @@ def test_a_second_sweep_on_a_folder_in_use_is_refused_and_a_stale_lock_is_taken_
     assert not (out / "sweep.lock").exists()
 
 
-def test_a_short_batch_is_padded_only_to_the_capacity_of_the_largest(sweep_dir):
+def test_a_short_batch_is_padded_only_to_the_capacity_of_the_largest(tmp_path):
     """Kernels compile for capacities: a batch shorter than the largest of its kind runs as
-    it is where its layout is the largest's (7 worlds of 25 bodies in 4 + 3: both take 4
-    worlds and 128 bodies), and else is padded to the fewest worlds that have that layout
-    (8 worlds in 7 + 1: the 1 to fewer than 7)."""
+    it is where its layout is the largest's (5 pillar worlds of 67 bodies in 3 + 2: both
+    take 8 worlds and 256 bodies), and else is padded to the fewest worlds that have that
+    layout (8 worlds in 7 + 1: the 1, 256 bodies, to 4, past 256, fewer than 7)."""
     from taichi_ice.engine.assemble import assemble
     from taichi_ice.engine.options import Options
     from taichi_ice.experiments.sweep.plan import contact_slots, plan_batches
     from taichi_ice.experiments.sweep.spec import world_scene
 
-    sweep = load_sweep(sweep_dir / "sweep.toml")
+    (tmp_path / "pillar.toml").write_text(open(PILLAR).read())
+    (tmp_path / "sweep.toml").write_text(SWEEP.replace('"small.toml"', '"pillar.toml"'))
+    sweep = load_sweep(tmp_path / "sweep.toml")
     worlds = sweep.worlds()
     slots = contact_slots(sweep)
 
@@ -421,9 +423,9 @@ def test_a_short_batch_is_padded_only_to_the_capacity_of_the_largest(sweep_dir):
         scene = world_scene(sweep.scene, case.overrides, case.seed, case.law)
         return assemble([scene] * n, Options(slots=slots, force_dt=True)).layout
 
-    by4 = plan_batches(dataclasses.replace(sweep, batch_size=4), worlds[:7], workers=1)
-    assert [(len(b.worlds), b.pad) for b in by4] == [(4, 0), (3, 0)]
-    assert layout(worlds[6], 3) == layout(worlds[0], 4)
+    by3 = plan_batches(dataclasses.replace(sweep, batch_size=3), worlds[:5], workers=1)
+    assert [(len(b.worlds), b.pad) for b in by3] == [(3, 0), (2, 0)]
+    assert layout(worlds[4], 2) == layout(worlds[0], 3)
     by7 = plan_batches(dataclasses.replace(sweep, batch_size=7), worlds, workers=1)
     assert [len(b.worlds) for b in by7] == [7, 1]
     last, pad = by7[1].worlds[-1], by7[1].pad

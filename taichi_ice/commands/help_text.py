@@ -7,7 +7,7 @@ Kept apart from ``cli`` so that ``commands.bench`` and ``commands.sweep``, whose
 
 from __future__ import annotations
 
-from ..engine.options import DEFAULT_SMALL_SLOTS, LARGE_SLOTS, MAX_SLOTS
+from ..engine.options import BODY_FLOOR, DEFAULT_SMALL_SLOTS, LARGE_SLOTS, MAX_SLOTS
 
 __all__ = ["ARCH_HELP", "PRECISION_HELP", "SLOTS_HELP", "scene_help"]
 
@@ -31,9 +31,10 @@ PRECISION_HELP = (
 SLOTS_HELP = (
     f"the most contacts one body can hold at once (1-{MAX_SLOTS}; default "
     f"{DEFAULT_SMALL_SLOTS}, plus one per wall or pusher in the scene, up to {LARGE_SLOTS} "
-    "more). A body that touches more in a step stops the run with an error that names the "
-    "number to pass; raise it for dense packs, or a body among much smaller ones. Each slot "
-    "costs about 20 bytes per body"
+    f"more; {DEFAULT_SMALL_SLOTS + LARGE_SLOTS} in a scene of up to {BODY_FLOOR} bodies). A "
+    "body that touches more in a step stops the run with an error that names the number to "
+    "pass; raise it for dense packs, or a body among much smaller ones. Each slot costs "
+    "about 20 bytes per body"
 )
 
 

@@ -27,7 +27,7 @@ from ..physics.drag import drag_coefficients
 from ..physics.forcing import air_drag_coefficient
 from ..scene.grid import ForcingGrid
 from ..scene.model import MAX_VERTICES
-from .options import DEFAULT_SMALL_SLOTS, LARGE_SLOTS, Options
+from .options import BODY_FLOOR, DEFAULT_SMALL_SLOTS, LARGE_SLOTS, Options
 from .schema import SCAN, HostArrays, Layout
 
 # A dynamic body that moves more than this fraction of its thinnest dimension in one step
@@ -66,14 +66,22 @@ MAX_VERTS_LIMIT = MAX_VERTICES
 # ensembles and a user's first runs do, compiled twice with a floor of 1). A world past the
 # scenes' has no bodies: its thread (thread-per-world stepping) and its rows of the
 # per-world loops find nothing to do.
+# Bodies take a floor of 256 (and the rest in proportion), so that every scene of up to 256
+# bodies, a user's edits of one and a sweep over layouts of tens to hundreds of floes, is
+# one layout: one compile (2026-12-02: the suite's workers built 107 layouts, 80 with these
+# floors and 67 with the small scenes' slots below; two squares' fields 10 kB -> 150 kB).
+# Stepping is the same: the pillar (67 bodies), two squares and the pushed field took the
+# same time a step at 256 rows as at their own capacities (128, 8 and 64; ratios
+# 1.00-1.04, one process, alternating), the pillar 7-9 % longer at 1024 rows (its ~100
+# fields' first rows spread over more memory pages), so the floor stops at 256.
 CAPACITY_POW2_MAX = 4096
 CAPACITY_FLOORS = {
-    "n_bodies": 8,
-    "n_local_verts": 32,
+    "n_bodies": BODY_FLOOR,
+    "n_local_verts": 8 * BODY_FLOOR,
     "n_worlds": 8,
-    "n_probes": 4,
-    "n_small": 8,
-    "n_large": 4,
+    "n_probes": 8,
+    "n_small": BODY_FLOOR,
+    "n_large": 64,
     "grid_nodes": 1,
 }
 # Outline matrices the contact kernels unroll: a body of 3 vertices runs in the kernels of 4.
@@ -165,7 +173,8 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
         options: the engine's settings (``options.Options``; default ``Options()``). Read
             here: ``dt`` and ``force_dt`` (``Options.time_step``), ``precision`` (None:
             'f64'), ``slots`` (None: ``DEFAULT_SMALL_SLOTS`` plus the most large bodies of
-            any world, at most ``LARGE_SLOTS``) and ``energy`` (``Layout.energy``; off, the
+            any world, at most ``LARGE_SLOTS``; plus ``LARGE_SLOTS`` for scenes of up to
+            ``BODY_FLOOR`` bodies) and ``energy`` (``Layout.energy``; off, the
             step neither computes nor stores its terms: fields of ~270 B a block fewer at
             f64).
 
@@ -189,6 +198,8 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     methods = {s.friction.method for s in scenes if hasattr(s.friction, "method")}
     large_per_world = sizes.pop("large_per_world")
     default_slots = DEFAULT_SMALL_SLOTS + min(int(large_per_world), LARGE_SLOTS)
+    if sizes["n_bodies"] <= BODY_FLOOR:  # small scenes: one layout, walls or none
+        default_slots = DEFAULT_SMALL_SLOTS + LARGE_SLOTS
     slots = options.slots if options.slots is not None else default_slots
     cell_size = sizes.pop("cell_size")
     skin = SKIN_FRACTION * cell_size

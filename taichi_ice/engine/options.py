@@ -44,8 +44,12 @@ INTEGRATORS = ("euler", "analytic", "coupled", "midstep")
 # and 2 contacts. A scene that needs more stops with a CapacityError that says what to
 # pass (``slots``, ``--slots``). At 1e5 blocks each slot costs 12 B a block (f64 Coulomb:
 # partner and stretch) and 8 more in the neighbour lists; 14 slots had taken 280 B.
+# A scene of up to BODY_FLOOR bodies (the smallest capacity a layout compiles for,
+# ``assemble.CAPACITY_FLOORS``) takes the LARGE_SLOTS whatever its walls: one layout, one
+# compile, for every small scene (2 slots cost ~10 kB there).
 DEFAULT_SMALL_SLOTS = 6
 LARGE_SLOTS = 2
+BODY_FLOOR = 256
 # Most slots a body may be given (``slots``): a convex block among blocks of its size touches
 # at most a dozen; 64 (~1.3 kB a block of slots and lists) leaves room for a block among
 # small ones. 1e9 used to reach Taichi's allocator (a 40 GB request and a traceback).
@@ -102,7 +106,8 @@ class Options:
                 raise UsageError(
                     f"slots = {self.slots}: contact slots per body must be 1 to {MAX_SLOTS} "
                     f"(default {DEFAULT_SMALL_SLOTS} plus one per wall or pusher, up to "
-                    f"{LARGE_SLOTS}); a run that needs more stops and says how many"
+                    f"{LARGE_SLOTS}, and {DEFAULT_SMALL_SLOTS + LARGE_SLOTS} for up to "
+                    f"{BODY_FLOOR} bodies); a run that needs more stops and says how many"
                 )
             object.__setattr__(self, "slots", int(self.slots))
         if self.stepping not in STEPPINGS:

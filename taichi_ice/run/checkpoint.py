@@ -37,11 +37,12 @@ import h5py
 import numpy as np
 
 from .. import provenance
+from ..engine import schema
 from ..errors import OutputError, RunFileError
 from ..scene.table import printable
 from .runfile_read import DAMAGE
 
-FORMAT_VERSION = "12"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
+FORMAT_VERSION = "13"  # 2: contact memory single-buffered (no buffer axis, no contact_area);
 #                       3: a status word per world;
 #                       4: each contact's stick-spring energy, a severed energy column;
 #                       5: a body's rotation (body_rot) instead of its turned outline;
@@ -54,6 +55,8 @@ FORMAT_VERSION = "12"  # 2: contact memory single-buffered (no buffer axis, no c
 #                       11: the analytic steps' contact booking (contact_booking)
 #                       12: each scene with the [ice] it resolved to (Scene.identity),
 #                           since a default changed (slide_resolution, 2026-11-27)
+#                       13: the scenes' rows only, not the capacities' (which grew:
+#                           assemble.CAPACITY_FLOORS)
 SUFFIX = ".ckpt"
 
 
@@ -87,12 +90,21 @@ def _grid_digests(scene) -> list[str]:
 
 def state(world) -> dict:
     """``{group: {name: array}}``: every field a run's state is, read back (what a checkpoint
-    holds and ``put_state`` puts back), in one launch (``World.transfer``)."""
+    holds and ``put_state`` puts back), in one launch (``World.transfer``): the rows of the
+    scenes' bodies, worlds and probes, not the capacity's (``_rows``), which no kernel
+    touches, so that a small scene's checkpoint is its own size."""
     arrays = world.transfer.read()
     return {
-        group: {name: arrays[name] for name in container.names}
+        group: {name: arrays[name][_rows(world, name)] for name in container.names}
         for group, container in (("data", world.data), ("nbr", world.neighbours))
     }
+
+
+def _rows(world, name: str) -> tuple[slice, ...]:
+    """The part of field ``name`` that holds the scenes' own rows: its shape for the scenes'
+    counts (``Batch.real``) within the shape allocated for the capacities."""
+    v = schema.var(name)
+    return tuple(slice(0, n) for n in schema.allocated_shape(world.batch.real, v))
 
 
 def put_state(sim, arrays: dict, steps: int, initial_energy, where: str | Path) -> None:
@@ -102,8 +114,8 @@ def put_state(sim, arrays: dict, steps: int, initial_energy, where: str | Path) 
         RunFileError: the arrays are not this World's fields (``where`` names their source).
     """
     world = sim.world
-    current = world.transfer.read()  # the fields a checkpoint does not hold stay as they are
-    shapes = world.transfer.shapes()
+    # The fields a checkpoint does not hold, and the rows past the scenes', stay as they are.
+    current = world.transfer.read()
     for group, container in (("data", world.data), ("nbr", world.neighbours)):
         names = set(container.names)
         saved = arrays[group]
@@ -114,12 +126,14 @@ def put_state(sim, arrays: dict, steps: int, initial_energy, where: str | Path) 
             )
         for name in container.names:
             array = np.asarray(saved[name])
-            if tuple(array.shape) != shapes[name]:
+            rows = _rows(world, name)
+            want = current[name][rows].shape
+            if tuple(array.shape) != want:
                 raise RunFileError(
                     f"{where}: field {name} has shape {array.shape} in the checkpoint; this "
-                    "run's is other: start anew with --overwrite"
+                    f"run's is {want}: start anew with --overwrite"
                 )
-            current[name] = array
+            current[name][rows] = array
     world.transfer.write(current)
     sim.initial_energy = np.asarray(initial_energy).copy()
     world.steps = int(steps)

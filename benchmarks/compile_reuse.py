@@ -51,13 +51,17 @@ CASES = (
     ("one body more", "a copy of the last body, 5 m above it", {"add_body": 1}),
     ("five bodies more", "copies of the last body, 5 m apart above it", {"add_body": 5}),
     ("ten bodies more", "copies of the last body, 5 m apart above it", {"add_body": 10}),
+    ("250 bodies more", "copies of the last body, 5 m apart above it", {"add_body": 250}),
+    ("260 bodies more", "past the floor of 256 bodies", {"add_body": 260}),
+    ("a wall", "a fixed 20 m x 1 m wall 5 m below (a large body)", {"add_wall": 1}),
 )
 
 
 def changed(raw: dict, changes: dict) -> dict:
     """The scene's tables with ``changes``: ``"table.key": factor`` multiplies,
     ``"table.key=": value`` sets, ``"scale"`` scales every outline and position,
-    ``"add_body": n`` adds n copies of the last body, 5 m apart above it."""
+    ``"add_body": n`` adds n copies of the last body, 5 m apart above it, ``"add_wall"`` a
+    fixed wall 5 m below the origin."""
     import copy
 
     import numpy as np
@@ -82,6 +86,12 @@ def changed(raw: dict, changes: dict) -> dict:
                 extra["name"] = f"{last.get('name', 'body')}-copy{k}"
                 extra.pop("probe", None)
                 raw["body"].append(extra)
+            continue
+        if key == "add_wall":
+            raw["body"].insert(  # first: "add_body" copies the last body
+                0, {"name": "wall", "shape": "rectangle", "width": 20.0, "length": 1.0,
+                    "position": [0.0, -5.0], "kind": "fixed"}
+            )  # fmt: skip
             continue
         table, name = key.rstrip("=").split(".")
         section = raw.setdefault(table, {})

@@ -71,8 +71,8 @@ MAX_VERTS_LIMIT = MAX_VERTICES
 # one layout: one compile (2026-12-02: the suite's workers built 107 layouts, 80 with these
 # floors and 67 with the small scenes' slots below; two squares' fields 10 kB -> 150 kB).
 # Stepping is the same: the pillar (67 bodies), two squares and the pushed field took the
-# same time a step at 256 rows as at their own capacities (128, 8 and 64; ratios
-# 1.00-1.04, one process, alternating), the pillar 7-9 % longer at 1024 rows (its ~100
+# same time a step at 256 rows as at their own capacities (128, 8 and 64; 256 over their
+# own 0.96-1.00, one process, alternating), the pillar 7-9 % longer at 1024 rows (its ~100
 # fields' first rows spread over more memory pages), so the floor stops at 256.
 CAPACITY_POW2_MAX = 4096
 CAPACITY_FLOORS = {

@@ -55,8 +55,8 @@ FORMAT_VERSION = "13"  # 2: contact memory single-buffered (no buffer axis, no c
 #                       11: the analytic steps' contact booking (contact_booking)
 #                       12: each scene with the [ice] it resolved to (Scene.identity),
 #                           since a default changed (slide_resolution, 2026-11-27)
-#                       13: the scenes' rows only, not the capacities' (which grew:
-#                           assemble.CAPACITY_FLOORS)
+#                       13: the scenes' bodies' and probes' rows only, not the
+#                           capacities' (which grew: assemble.CAPACITY_FLOORS)
 SUFFIX = ".ckpt"
 
 
@@ -91,8 +91,8 @@ def _grid_digests(scene) -> list[str]:
 def state(world) -> dict:
     """``{group: {name: array}}``: every field a run's state is, read back (what a checkpoint
     holds and ``put_state`` puts back), in one launch (``World.transfer``): the rows of the
-    scenes' bodies, worlds and probes, not the capacity's (``_rows``), which no kernel
-    touches, so that a small scene's checkpoint is its own size."""
+    scenes' bodies and probes, not the capacity's (``_rows``), which no kernel touches, so
+    that a small scene's checkpoint is its own size."""
     arrays = world.transfer.read()
     return {
         group: {name: arrays[name][_rows(world, name)] for name in container.names}
@@ -100,11 +100,20 @@ def state(world) -> dict:
     }
 
 
+# The axes cut to the scenes' counts in a checkpoint. Not the worlds': a world past the
+# scenes' has no bodies, but a GPU's kernel per stage still writes its rows of the per-world
+# fields (its lists' staleness: found on Vulkan), and a resumed run must hold them too.
+SCENE_AXES = ("n_bodies", "n_probes")
+
+
 def _rows(world, name: str) -> tuple[slice, ...]:
-    """The part of field ``name`` that holds the scenes' own rows: its shape for the scenes'
-    counts (``Batch.real``) within the shape allocated for the capacities."""
+    """The part of field ``name`` a checkpoint holds: the scenes' rows (``Batch.real``'s
+    counts) along ``SCENE_AXES``, the whole of every other axis."""
     v = schema.var(name)
-    return tuple(slice(0, n) for n in schema.allocated_shape(world.batch.real, v))
+    real = schema.allocated_shape(world.batch.real, v)
+    return tuple(
+        slice(0, n) if axis in SCENE_AXES else slice(None) for axis, n in zip(v.shape, real)
+    )
 
 
 def put_state(sim, arrays: dict, steps: int, initial_energy, where: str | Path) -> None:

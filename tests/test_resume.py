@@ -93,6 +93,11 @@ def test_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, monkeypa
     resumed = Simulation(scene, integrator=integrator)
     result = resumed.run(until=UNTIL, out=path, resume=True)
     assert result.status == "complete"
+    # The checkpoint held the scene's bodies' rows, not the capacity's (the resumed fields'
+    # rows past them are a new World's, as the uninterrupted run's are), and every world's.
+    layout = resumed.world.layout
+    assert saved["data"]["body_pos"].shape[0] == scene.n_bodies < layout.n_bodies
+    assert saved["nbr"]["world_nbr_stale"].shape[0] == layout.n_worlds
 
     a, b = read_run(tmp_path / "whole.h5"), read_run(path)
     assert b["attrs"]["resumed"] == 1

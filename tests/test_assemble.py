@@ -174,12 +174,12 @@ def _squares(n: int, walls: bool = False):
 
 
 def test_every_scene_of_up_to_256_bodies_compiles_for_the_same_sizes():
-    """Small scenes share one set of sizes (``assemble.CAPACITY_FLOORS``, and the slots of a
-    scene with walls, ``options.BODY_FLOOR``), so a user's edits and a sweep over layouts of up
-    to 256 floes compile once (for each largest outline: 4, 8 or 16 vertices, a switch of the
-    kernels): every bundled scene (2 to 67 bodies, walls or none), squares by the hundred with
-    and without walls; past 256 bodies, the next power of two, and the
-    slots its walls ask (six without, eight with four)."""
+    """Every scene of up to 256 bodies (``options.BODY_FLOOR``) compiles for the same sizes
+    (``assemble.CAPACITY_FLOORS``) and contact slots, walls or none, so that a user's edits
+    and a sweep over layouts of up to 256 floes compile once (per largest outline, 4, 8 or 16
+    vertices: a switch of the kernels): every bundled scene (2 to 67 bodies), and 1, 252
+    (with four walls) and 256 squares; past 256 bodies the next power of two, and the slots
+    the walls ask (6 without, 8 with four)."""
     from taichi_ice.engine.options import BODY_FLOOR, DEFAULT_SMALL_SLOTS, LARGE_SLOTS
 
     scenes = [load_scenario(p) for p in sorted((ROOT / "scenarios").glob("*.toml"))]

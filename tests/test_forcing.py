@@ -411,6 +411,25 @@ def test_a_grid_of_one_value_runs_bit_for_bit_as_that_uniform_current(f64, tmp_p
     np.testing.assert_array_equal(a.energies(), b.energies())
 
 
+def test_grids_of_other_sizes_share_a_layout(tmp_path):
+    """A grid's shape, origin and spacing are model data and its nodes a capacity (4,096 at
+    least, ``assemble.CAPACITY_FLOORS``): scenes on a current grid of 4 x 4 nodes and one of
+    7 x 5 compile one set of kernels; a grid past 4,096 nodes takes the next capacity."""
+    from taichi_ice.engine.assemble import assemble
+
+    def on_grid(nx, ny):
+        x, y = np.linspace(-40.0, 80.0, nx), np.linspace(-30.0, 60.0, ny)
+        gx, gy = np.meshgrid(x, y)
+        path = write_grid(tmp_path / f"c{nx}x{ny}.nc", 0.1 + 0 * gx, 0 * gy, x, y)
+        current = {"current": {"file": str(path), "u": "uo", "v": "vo"}}
+        return assemble([scene(grid_floes(), SMALL[1], water=current)])
+
+    small, other, large = on_grid(4, 4), on_grid(7, 5), on_grid(80, 60)
+    assert small.layout.current_grid and small.real.grid_nodes == 16
+    assert other.real.grid_nodes == 35 and other.layout == small.layout
+    assert large.layout.grid_nodes == 5120 and large.layout != small.layout  # 4,800 nodes
+
+
 def test_a_bilinear_current_is_sampled_exactly_at_the_centroid(f64, tmp_path):
     """u = (0.1 + 2e-3 x - 1e-3 y, -0.05 + 1e-3 y + 2e-5 x y) on the grid: one step from rest
     gives each floe dt c |u| u / m with u at its centroid, clamped to the grid beyond it."""

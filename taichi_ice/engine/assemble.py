@@ -82,7 +82,7 @@ CAPACITY_FLOORS = {
     "n_probes": 8,
     "n_small": BODY_FLOOR,
     "n_large": 64,
-    "grid_nodes": 1,
+    "grid_nodes": 4096,  # a forcing grid's nodes (64 kB at f64), allocated only for a grid
 }
 # Outline matrices the contact kernels unroll: a body of 3 vertices runs in the kernels of 4.
 MAX_VERTS_STEPS = (4, 8, MAX_VERTICES)

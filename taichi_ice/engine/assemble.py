@@ -68,8 +68,8 @@ MAX_VERTS_LIMIT = MAX_VERTICES
 # per-world loops find nothing to do.
 # Bodies take a floor of 256 (and the rest in proportion), so that every scene of up to 256
 # bodies, a user's edits of one and a sweep over layouts of tens to hundreds of floes, is
-# one layout: one compile (2026-12-02: the suite's workers built 107 layouts, 80 with these
-# floors and 67 with the small scenes' slots below; two squares' fields 10 kB -> 150 kB).
+# one layout: one compile (2026-12-02: the suite's workers built 107 layouts before, 69 with
+# these floors and the small scenes' slots below; two squares' fields 10 kB -> 150 kB).
 # Stepping is the same: the pillar (67 bodies), two squares and the pushed field took the
 # same time a step at 256 rows as at their own capacities (128, 8 and 64; 256 over their
 # own 0.96-1.00, one process, alternating), the pillar 7-9 % longer at 1024 rows (its ~100

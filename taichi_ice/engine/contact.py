@@ -245,15 +245,15 @@ class ContactStage(ContactLists):
         # CPU time there; the jammed pillar scene's step the same.)
         toward = ti.cast(xj_ - xi_, self.layout.real)
         gap = facing_gap_ti(p, p_normals, n_p, q, n_q, toward)
+        q_normals = self.normals(j)  # turned, not normalised: the SAT's too (-10 % in a jam)
         if gap < 0.0:
-            gap = facing_gap_ti(q, self.normals(j), n_q, p, n_p, -toward)
+            gap = facing_gap_ti(q, q_normals, n_q, p, n_p, -toward)
         separated = gap >= 0.0
         area = 0.0
-        point = ti.math.vec2(0.0, 0.0)
-        normal = ti.math.vec2(0.0, 0.0)
+        point, normal = ti.math.vec2(0.0, 0.0), ti.math.vec2(0.0, 0.0)
         width = 0.0
         if not separated:
-            area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
+            area, point, normal, width, _ = overlap_normals_ti(p, p_normals, n_p, q, q_normals, n_q)
         if area > 0.0:
             # The world's contact law (model data: worlds of a batch may differ in it).
             w = m.body_world[i]

@@ -133,8 +133,9 @@ class ContactLists(Stage):
         p = self.turned_by(i, m.vert_local, c_i, True, rot_i[0], rot_i[1])
         p_normals = self.turned_by(i, m.vert_normal_local, zero, False, rot_i[0], rot_i[1])
         q = self.turned_by(j, m.vert_local, c_j, True, rot_j[0], rot_j[1])
+        q_normals = self.turned_by(j, m.vert_normal_local, zero, False, rot_j[0], rot_j[1])
         n_p, n_q = m.body_vert_count[i], m.body_vert_count[j]
-        area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, n_q)
+        area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, q_normals, n_q)
         return area, point, normal, width, c_i, c_j
 
     @ti.func

@@ -142,15 +142,18 @@ def min_penetration_axis_ti(p: ti.template(), n_p, q: ti.template(), n_q):
         penetration when overlapping, the gap along the first separating edge (``<= 0``)
         when separated; axis a unit 2-vector from ``p`` toward ``q``.
     """
-    normals = edge_normals_ti(p, n_p)
-    return _min_penetration_axis_ti(p, normals, n_p, q, n_q)
+    return _min_penetration_axis_ti(
+        p, edge_normals_ti(p, n_p), n_p, q, edge_normals_ti(q, n_q), n_q
+    )
 
 
 @ti.func
 def _min_penetration_axis_ti(
-    p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), n_q
+    p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), q_normals: ti.template(), n_q
 ):
-    """:func:`min_penetration_axis_ti` with the edge normals of ``p`` given."""
+    """:func:`min_penetration_axis_ti` with the edge normals of both polygons given (the
+    engine's are its bodies' shapes' normals turned, ``ContactLists.normals``: without them
+    the four square roots and divisions of q's edges cost 10-15 % of a jammed step)."""
     # Stops at the first separating axis: most candidate pairs of a dense field are near
     # misses, and the depth of a separated pair only matters by its sign. The loops are
     # unrolled over the matrices' static size (rows past the count skipped), so every index
@@ -172,7 +175,7 @@ def _min_penetration_axis_ti(
     if not separated:
         for k in ti.static(range(q.n)):
             if k < n_q and not separated:
-                d, n = _edge_penetration_ti(q, n_q, p, n_p, k)
+                d, n = _normal_penetration_ti(q, q_normals, k, p, n_p)
                 if d < depth:
                     depth, axis = d, -n
                 if depth <= 0.0:
@@ -190,22 +193,12 @@ def _after(k, n):
 
 
 @ti.func
-def _edge_penetration_ti(
-    own: ti.template(), n_own, other: ti.template(), n_other, k: ti.template()
-):
-    """How far ``other`` reaches past edge ``k`` (a compile-time index) of ``own`` along its
-    outward unit normal (m; <= 0: that edge's line separates them), and the normal."""
-    a = ti.math.vec2(own[k, 0], own[k, 1])
-    e = _next_row(own, k, n_own) - a
-    n = ti.math.vec2(e[1], -e[0]).normalized()
-    return _reach_past_ti(a, n, other, n_other), n
-
-
-@ti.func
 def _normal_penetration_ti(
     own: ti.template(), normals: ti.template(), k: ti.template(), other: ti.template(), n_other
 ):
-    """:func:`_edge_penetration_ti` with the outward unit normals of ``own`` given."""
+    """How far ``other`` reaches past edge ``k`` (a compile-time index) of ``own`` along its
+    outward unit normal ``normals[k]`` (m; <= 0: that edge's line separates them), and the
+    normal."""
     a = ti.math.vec2(own[k, 0], own[k, 1])
     n = ti.math.vec2(normals[k, 0], normals[k, 1])
     return _reach_past_ti(a, n, other, n_other), n
@@ -306,16 +299,18 @@ def _clip_ti(p: ti.template(), n_p, q: ti.template(), n_q):
 
 @ti.func
 def overlap_ti(p: ti.template(), n_p, q: ti.template(), n_q):
-    """Taichi twin of :func:`polygon.overlap`: :func:`overlap_normals_ti` with the normals of ``p``
-    computed here."""
-    normals = edge_normals_ti(p, n_p)
-    return overlap_normals_ti(p, normals, n_p, q, n_q)
+    """Taichi twin of :func:`polygon.overlap`: :func:`overlap_normals_ti` with the polygons'
+    edge normals computed here."""
+    return overlap_normals_ti(p, edge_normals_ti(p, n_p), n_p, q, edge_normals_ti(q, n_q), n_q)
 
 
 @ti.func
-def overlap_normals_ti(p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), n_q):
+def overlap_normals_ti(
+    p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), q_normals: ti.template(), n_q
+):
     """Contact geometry of two convex polygons (the Taichi twin of :func:`polygon.overlap`), the
-    outward unit normals of ``p``'s edges given (``edge_normals_ti``).
+    outward unit normals of both polygons' edges given (``edge_normals_ti``, or a body's
+    shape's normals turned).
 
     The contact kernel gathers the world-coordinate vertices of bodies i and j into local
     matrices (e.g. ``ti.Matrix.zero(float, MAXV, 2)`` filled row by row) and calls this.
@@ -329,6 +324,7 @@ def overlap_normals_ti(p: ti.template(), p_normals: ti.template(), n_p, q: ti.te
         p_normals: ``edge_normals_ti(p, n_p)``.
         n_p: number of vertices of ``p`` (3 <= n_p <= P).
         q: ``ti.Matrix`` of static shape ``(Q, 2)``, likewise (m).
+        q_normals: ``edge_normals_ti(q, n_q)``.
         n_q: number of vertices of ``q`` (3 <= n_q <= Q).
 
     Returns:
@@ -342,7 +338,7 @@ def overlap_normals_ti(p: ti.template(), p_normals: ti.template(), n_p, q: ti.te
     normal = ti.math.vec2(0.0, 0.0)
     width = 0.0
     kind = OverlapKind.NONE
-    depth, axis = _min_penetration_axis_ti(p, p_normals, n_p, q, n_q)
+    depth, axis = _min_penetration_axis_ti(p, p_normals, n_p, q, q_normals, n_q)
     if depth > 0.0:
         buf, start, count = _clip_ti(p, n_p, q, n_q)
         # Fan from the first vertex, as polygon._area_centroid does.

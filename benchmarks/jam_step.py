@@ -1,0 +1,168 @@
+"""What a step of the jammed pillar costs, and a 20 s pillar run's stepping, for one engine or
+several side by side (the paper's scene, one world, a thread, Euler, float64).
+
+    python benchmarks/jam_step.py --out out/jam_step
+    git worktree add /tmp/before <rev>
+    python benchmarks/jam_step.py --out out/jam_step --trees /tmp/before . --rounds 4
+
+Each tree (a checkout holding ``taichi_ice``) runs in fresh processes, the trees one after
+the other in every round, so that the machine's load falls on both alike. A process, for each
+law: runs the pillar to ``--at`` seconds (the jam carries load from about 10 s), saves that
+state (``World.transfer``), and steps ``--steps`` steps from it ``--windows`` times (the
+same steps each time: the fastest and the median window per step); then times a whole run
+from 0 to 20 s after a first step that compiled, and hashes its positions and angles at 20 s
+(equal hashes: the trees' trajectories are the same bit for bit).
+
+Writes ``jam_step.json`` (every window and run, the trees' git revisions, the machine) and
+``jam_step.png`` into ``--out``, and prints a line per run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def worker(law_text: str, at: float, steps: int, windows: int) -> dict:
+    import hashlib
+
+    import numpy as np
+
+    from taichi_ice import Simulation, backend, load_scenario
+    from taichi_ice.physics.friction_parse import parse_law
+
+    backend.init("cpu", "f64")
+    law = parse_law(law_text)
+    sim = Simulation([load_scenario("pillar")], friction=law, arch="cpu", precision="f64")
+    sim.run(until=at)
+    world = sim.world
+    state, done = world.transfer.read(), world.steps
+    per_step = []
+    for _ in range(windows):
+        world.transfer.write(state)
+        world.steps, world.time = done, done * world.dt
+        start = time.perf_counter()
+        world.advance(steps)
+        world.check()
+        per_step.append((time.perf_counter() - start) / steps)
+    contacts = int(world.contact_counts().sum())
+
+    run = Simulation([load_scenario("pillar")], friction=law, arch="cpu", precision="f64")
+    run.run(until=run.dt)  # compiled (or loaded) and stepped once
+    start = time.perf_counter()
+    run.run(until=20.0)
+    stepping = time.perf_counter() - start
+    end = run.world
+    digest = hashlib.sha1(end.positions().tobytes() + end.angles().tobytes()).hexdigest()
+    return {
+        "jam_us": [1e6 * s for s in per_step],
+        "jam_fastest_us": 1e6 * min(per_step),
+        "jam_median_us": 1e6 * float(np.median(per_step)),
+        "jam_contacts": contacts,
+        "run_steps": int(run.world.steps),
+        "run_stepping_s": stepping,
+        "run_hash": digest[:12],
+    }
+
+
+def _git(tree: Path) -> str:
+    out = subprocess.run(
+        ["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    )
+    dirty = subprocess.run(
+        ["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"],
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
+    return out.stdout.strip() + ("+changes" if dirty else "")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("out/jam_step"))
+    ap.add_argument("--trees", nargs="+", type=Path, default=[ROOT], help="checkouts to compare")
+    ap.add_argument("--laws", default="coulomb:0.9,rate-state", help="comma-separated laws")
+    ap.add_argument("--rounds", type=int, default=3, help="fresh processes per tree and law")
+    ap.add_argument("--at", type=float, default=15.0, help="the jam's state: seconds run first")
+    ap.add_argument("--steps", type=int, default=2000, help="steps a timed window")
+    ap.add_argument("--windows", type=int, default=9, help="timed windows from that state")
+    ap.add_argument("--worker", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker:
+        print(json.dumps(worker(args.worker, args.at, args.steps, args.windows)))
+        return 0
+
+    trees = [t.resolve() for t in args.trees]
+    for tree in trees:
+        if not (tree / "taichi_ice" / "__init__.py").is_file():
+            print(f"--trees: {tree} holds no taichi_ice package (a checkout of the repository)")
+            return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    runs = []
+    for law in args.laws.split(","):
+        for r in range(args.rounds):
+            for tree in trees:
+                env = {**os.environ, "PYTHONPATH": str(tree)}
+                cmd = [sys.executable, __file__, "--at", str(args.at), "--steps", str(args.steps)]
+                cmd += ["--windows", str(args.windows), "--worker", law]
+                proc = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=tree)
+                if proc.returncode != 0:
+                    print(proc.stderr[-2000:], file=sys.stderr)
+                    return 1
+                row = {"law": law, "round": r, "tree": str(tree), "git": _git(tree)}
+                row.update(json.loads(proc.stdout.splitlines()[-1]))
+                runs.append(row)
+                print(
+                    f"{law:12s} {row['git']:>16s}  jam {row['jam_fastest_us']:5.1f} us a step "
+                    f"(median {row['jam_median_us']:5.1f}; {row['jam_contacts']} contacts)  "
+                    f"20 s run: {row['run_stepping_s']:5.2f} s stepping, {row['run_hash']}",
+                    flush=True,
+                )
+    (args.out / "jam_step.json").write_text(
+        json.dumps(
+            {"machine": platform.platform(), "cpus": os.cpu_count(), "at": args.at,
+             "steps": args.steps, "windows": args.windows, "runs": runs},
+            indent=1,
+        )
+    )  # fmt: skip
+    _chart(runs, args.out / "jam_step.png")
+    return 0
+
+
+def _chart(runs, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    laws = list(dict.fromkeys(r["law"] for r in runs))
+    trees = list(dict.fromkeys((r["tree"], r["git"]) for r in runs))
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), layout="constrained")
+    for ax, key, label in (
+        (axes[0], "jam_fastest_us", "jammed step, fastest window (us)"),
+        (axes[1], "run_stepping_s", "20 s run, stepping (s)"),
+    ):
+        for k, (tree, git) in enumerate(trees):
+            for j, law in enumerate(laws):
+                ys = [r[key] for r in runs if r["tree"] == tree and r["law"] == law]
+                xs = [j + 0.25 * (k - (len(trees) - 1) / 2)] * len(ys)
+                ax.plot(xs, ys, "o", color=f"C{k}", label=git if j == 0 else None)
+        ax.set_xticks(range(len(laws)), laws)
+        ax.set_ylabel(label)
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+    axes[0].legend(title="engine", fontsize=8)
+    fig.suptitle("pillar scene, one world, a thread (each point a fresh process)", fontsize=10)
+    fig.savefig(path, dpi=120)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -245,7 +245,7 @@ class ContactStage(ContactLists):
         # CPU time there; the jammed pillar scene's step the same.)
         toward = ti.cast(xj_ - xi_, self.layout.real)
         gap = facing_gap_ti(p, p_normals, n_p, q, n_q, toward)
-        q_normals = self.normals(j)  # turned, not normalised: the SAT's too (-10 % in a jam)
+        q_normals = self.normals(j)  # turned, not normalised: the SAT's too (-7-14 % in a jam)
         if gap < 0.0:
             gap = facing_gap_ti(q, q_normals, n_q, p, n_p, -toward)
         separated = gap >= 0.0

@@ -472,16 +472,14 @@ def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
         q: ``(m, 2)`` counter-clockwise convex polygon in world coordinates (m).
 
     Returns:
-        An :class:`Overlap`. Separated or touching polygons (SAT depth ``<= 0`` or zero
-        clipped area) give ``kind == OverlapKind.NONE`` with zero area, centroid, normal and
-        width.
+        An :class:`Overlap`. Separated or touching polygons (zero clipped area: an edge
+        line separates them, round-off aside) give ``kind == OverlapKind.NONE`` with zero
+        area, centroid, normal and width. The separating-axis test runs only for the
+        fallback's axis (a pair that overlaps has no separating axis to stop it early).
     """
     p = np.asarray(p, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
     none = Overlap(0.0, np.zeros(2), np.zeros(2), 0.0, OverlapKind.NONE)
-    depth, axis = min_penetration_axis(p, q)
-    if depth <= 0.0:
-        return none
     poly = intersection_polygon(p, q)
     area, centroid = _area_centroid(poly)
     if area <= 0.0:
@@ -494,6 +492,7 @@ def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
         if width > 0.0:
             normal = np.array([-chord[1], chord[0]]) / width
             return Overlap(area, centroid, normal, width, OverlapKind.CHORD)
+    _depth, axis = min_penetration_axis(p, q)
     tangent = np.array([-axis[1], axis[0]])
     along = poly @ tangent
     return Overlap(area, centroid, axis, float(along.max() - along.min()), OverlapKind.FALLBACK)

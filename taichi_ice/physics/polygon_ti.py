@@ -338,64 +338,78 @@ def overlap_normals_ti(
     normal = ti.math.vec2(0.0, 0.0)
     width = 0.0
     kind = OverlapKind.NONE
-    depth, axis = _min_penetration_axis_ti(p, p_normals, n_p, q, q_normals, n_q)
-    if depth > 0.0:
-        buf, start, count = _clip_ti(p, n_p, q, n_q)
-        # Fan from the first vertex, as polygon._area_centroid does.
-        origin = _row(buf, start)
-        twice_area = 0.0
-        moment = ti.math.vec2(0.0, 0.0)
-        for k in range(1, count - 1):
-            u = _row(buf, start + k) - origin
-            w = _row(buf, start + k + 1) - origin
-            cr = _cross_ti(u, w)
-            twice_area += cr
-            moment += (u + w) * cr
-        if twice_area > 0.0:
-            area = 0.5 * twice_area
-            centroid = origin + moment / (3.0 * twice_area)
-            # Boundary crossings, by the rule of polygon.boundary_crossings(): keep the first two.
-            crossings = 0
-            entering_count = 0
-            enter = ti.math.vec2(0.0, 0.0)
-            leave = ti.math.vec2(0.0, 0.0)
+    # The clip decides whether they overlap, and the separating-axis test runs only for the
+    # fallback's axis: the engine's pairs reach here past the two facing edges' test, and
+    # nearly all of them touch, where the full test found no axis after all of them (a fifth
+    # of a jammed pillar step, benchmarks/jam_step.py). Round-off aside, an axis separates
+    # two convex polygons exactly when their intersection has no area.
+    buf, start, count = _clip_ti(p, n_p, q, n_q)
+    # Fan from the first vertex, as polygon._area_centroid does.
+    origin = _row(buf, start)
+    twice_area = 0.0
+    moment = ti.math.vec2(0.0, 0.0)
+    for k in range(1, count - 1):
+        u = _row(buf, start + k) - origin
+        w = _row(buf, start + k + 1) - origin
+        cr = _cross_ti(u, w)
+        twice_area += cr
+        moment += (u + w) * cr
+    if twice_area > 0.0:
+        area = 0.5 * twice_area
+        centroid = origin + moment / (3.0 * twice_area)
+        # Boundary crossings, by the rule of polygon.boundary_crossings() (a chord needs two,
+        # one entering: their order does not matter).
+        crossings = 0
+        entering_count = 0
+        enter = ti.math.vec2(0.0, 0.0)
+        leave = ti.math.vec2(0.0, 0.0)
+        for j in range(n_q):
+            c = _row(q, j)
+            d = _row(q, _after(j, n_q))
+            cd = d - c
+            # Each vertex's side of q's edge line j once: the next edge's start is this
+            # one's end (the twin's sa and sb).
+            a = _row(p, 0)
+            sa = _cross_ti(cd, a - c)
+            first_side = sa
             for i in range(n_p):
-                a = _row(p, i)
-                ab = _row(p, _after(i, n_p)) - a
-                for j in range(n_q):
-                    c = _row(q, j)
-                    cd = _row(q, _after(j, n_q)) - c
-                    sa = _cross_ti(cd, a - c)
-                    sb = _cross_ti(cd, a + ab - c)
-                    # Most edge pairs do not straddle each other's lines: test one first.
-                    if (sa > 0.0) != (sb > 0.0):
-                        tc = _cross_ti(ab, c - a)
-                        td = _cross_ti(ab, c + cd - a)
-                        if (tc > 0.0) != (td > 0.0):
-                            x = a + (sa / (sa - sb)) * ab
-                            if sb > 0.0:
-                                entering_count += 1
-                                enter = x
-                            else:
-                                leave = x
-                            crossings += 1
-            chord = enter - leave
-            chord_length = chord.norm()
-            if crossings == 2 and entering_count == 1 and chord_length > 0.0:
-                kind = OverlapKind.CHORD
-                width = chord_length
-                normal = ti.math.vec2(-chord[1], chord[0]) / chord_length
-            else:
-                kind = OverlapKind.FALLBACK
-                normal = axis
-                tangent = ti.math.vec2(-axis[1], axis[0])
-                lo = ti.math.dot(tangent, origin)
-                hi = lo
-                for k in range(1, count):
-                    s = ti.math.dot(tangent, _row(buf, start + k))
-                    lo = ti.min(lo, s)
-                    hi = ti.max(hi, s)
-                width = hi - lo
+                b = _row(p, _after(i, n_p))
+                sb = first_side
+                if i + 1 < n_p:
+                    sb = _cross_ti(cd, b - c)
+                # Most edge pairs do not straddle each other's lines: test one first.
+                if (sa > 0.0) != (sb > 0.0):
+                    ab = b - a
+                    tc = _cross_ti(ab, c - a)
+                    td = _cross_ti(ab, d - a)
+                    if (tc > 0.0) != (td > 0.0):
+                        x = a + (sa / (sa - sb)) * ab
+                        if sb > 0.0:
+                            entering_count += 1
+                            enter = x
+                        else:
+                            leave = x
+                        crossings += 1
+                a = b
+                sa = sb
+        chord = enter - leave
+        chord_length = chord.norm()
+        if crossings == 2 and entering_count == 1 and chord_length > 0.0:
+            kind = OverlapKind.CHORD
+            width = chord_length
+            normal = ti.math.vec2(-chord[1], chord[0]) / chord_length
+        else:
+            kind = OverlapKind.FALLBACK
+            _depth, axis = _min_penetration_axis_ti(p, p_normals, n_p, q, q_normals, n_q)
+            normal = axis
+            tangent = ti.math.vec2(-axis[1], axis[0])
+            lo = ti.math.dot(tangent, origin)
+            hi = lo
+            for k in range(1, count):
+                s = ti.math.dot(tangent, _row(buf, start + k))
+                lo = ti.min(lo, s)
+                hi = ti.max(hi, s)
+            width = hi - lo
     return area, centroid, normal, width, kind
 
 

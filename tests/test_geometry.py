@@ -404,6 +404,50 @@ def test_overlap_hand_cases(name, taichi_runtime):
     assert ti_ov.width[0] == pytest.approx(width, abs=tol)
 
 
+def _lattice_pairs(count: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Seeded convex polygons with integer vertices, offset by integers: their vertices meet,
+    lie on each other's edges and their edges overlap exactly, in float64 and float32."""
+    rng = np.random.default_rng(SEED + 2)
+
+    def lattice_polygon():
+        while True:
+            hull = MultiPoint(rng.integers(0, 5, size=(MAXV, 2)).astype(float)).convex_hull
+            if hull.geom_type == "Polygon":
+                # GEOS drops collinear points; orient counter-clockwise.
+                ring = shapely.geometry.polygon.orient(hull, 1.0).exterior.coords
+                return check_polygon(np.array(ring)[:-1])
+
+    return [
+        (lattice_polygon(), lattice_polygon() + rng.integers(-4, 5, size=2))
+        for _ in range(count)
+    ]
+
+
+def test_overlap_of_lattice_polygons_matches_shapely_and_its_twin(taichi_runtime):
+    """Where vertices meet and edges touch or lie on one another, the chord's walk and the
+    clip give shapely's area and centroid, and the Taichi twin the same kind and numbers."""
+    pairs = _lattice_pairs(1500)
+    ours = [overlap(p, q) for p, q in pairs]
+    kinds = [sum(o.kind == k for o in ours) for k in OverlapKind]
+    print(f"lattice pairs: {dict(zip([k.name for k in OverlapKind], kinds))}")
+    assert min(kinds) > 100  # every case met, chords through vertices among them
+    shapes = [Polygon(p).intersection(Polygon(q)) for p, q in pairs]
+    _assert_area_centroid(
+        "numpy", [o.area for o in ours], [o.centroid for o in ours], pairs, shapes, SHAPELY_RTOL
+    )
+    # Integers are exact in float32 too: every side test, hence every kind, is the same.
+    pp, n_p = _pad([p for p, _ in pairs])
+    qq, n_q = _pad([q for _, q in pairs])
+    result = overlap_batch_ti(pp, n_p, qq, n_q)
+    np.testing.assert_array_equal(result.kind, [o.kind for o in ours])
+    rtol = max(SHAPELY_RTOL, _ti_rtol(taichi_runtime))
+    _assert_area_centroid("taichi", result.area, result.centroid, pairs, shapes, rtol)
+    chord = result.kind == OverlapKind.CHORD
+    np.testing.assert_allclose(
+        result.width[chord], [o.width for o, c in zip(ours, chord) if c], rtol=rtol
+    )
+
+
 def test_face_on_width_and_area_follow_the_depth():
     """A square pressed face-on by depth d overlaps side * d, width = side, face normal."""
     side = 0.7

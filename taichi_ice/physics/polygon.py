@@ -425,6 +425,13 @@ def boundary_crossings(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.nda
         then edge of ``q``, and ``(c,)`` bools, True where the boundary of ``p``, walked
         counter-clockwise, enters ``q``.
     """
+    points, entering, _edge_p, _edge_q = _crossings(p, q)
+    return points, entering
+
+
+def _crossings(p: np.ndarray, q: np.ndarray):
+    """:func:`boundary_crossings` with the edge of ``p`` and of ``q`` each point lies on
+    (``(c,)`` indices; edge k runs from vertex k to k + 1)."""
     p = np.asarray(p, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
     a, b = p[:, None, :], np.roll(p, -1, axis=0)[:, None, :]
@@ -438,18 +445,36 @@ def boundary_crossings(p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.nda
     i, j = np.nonzero(hit)
     t = sa[i, j] / (sa[i, j] - sb[i, j])
     points = p[i] + t[:, None] * (np.roll(p, -1, axis=0)[i] - p[i])
-    return points, sb[i, j] > 0.0
+    return points, sb[i, j] > 0.0, i, j
+
+
+def _chord_polygon(p, q, enter, leave, enter_edges, leave_edges) -> np.ndarray:
+    """The intersection of ``p`` and ``q`` whose boundaries cross exactly twice: ``enter``
+    (on edge ``enter_edges[0]`` of ``p`` and ``enter_edges[1]`` of ``q``), ``p``'s vertices
+    after that edge up to the start of ``leave``'s edge, ``leave``, and ``q``'s vertices
+    after ``leave``'s edge of ``q`` up to the start of ``enter``'s (counter-clockwise)."""
+
+    def after(poly, start, stop):
+        # The vertices after edge ``start`` up to the one that starts edge ``stop``.
+        k, out = int(start), []
+        while k != int(stop):
+            k = (k + 1) % len(poly)
+            out.append(poly[k])
+        return out
+
+    walk = [enter, *after(p, enter_edges[0], leave_edges[0])]
+    walk += [leave, *after(q, leave_edges[1], enter_edges[1])]
+    return np.array(walk, dtype=np.float64)
 
 
 def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
     """Contact geometry of two convex polygons in the Hopkins (1992) overlap model.
 
-    The intersection polygon (``p`` clipped by ``q``) gives the area ``A_ov`` and the contact
-    point (its centroid). When the two boundaries cross exactly twice, once where the
-    boundary of ``p`` enters ``q`` (``E``) and once where it leaves (``X``), the chord
-    ``X -> E`` is the contact line: the width is its length and the normal its left
-    perpendicular, which points to the side where the boundary of ``p`` lies inside ``q``,
-    i.e. out of ``p`` into ``q``.
+    The intersection polygon gives the area ``A_ov`` and the contact point (its centroid).
+    When the two boundaries cross exactly twice, once where the boundary of ``p`` enters
+    ``q`` (``E``) and once where it leaves (``X``), the chord ``X -> E`` is the contact
+    line: the width is its length and the normal its left perpendicular, which points to the
+    side where the boundary of ``p`` lies inside ``q``, i.e. out of ``p`` into ``q``.
 
     Fallback (``kind == OverlapKind.FALLBACK``) when there are not exactly one entry and one
     exit: the normal is the separating-axis minimum-penetration axis over both polygons'
@@ -472,26 +497,34 @@ def overlap(p: np.ndarray, q: np.ndarray) -> Overlap:
         q: ``(m, 2)`` counter-clockwise convex polygon in world coordinates (m).
 
     Returns:
-        An :class:`Overlap`. Separated or touching polygons (zero clipped area: an edge
-        line separates them, round-off aside) give ``kind == OverlapKind.NONE`` with zero
-        area, centroid, normal and width. The separating-axis test runs only for the
-        fallback's axis (a pair that overlaps has no separating axis to stop it early).
+        An :class:`Overlap`. Separated or touching polygons (zero area: an edge line
+        separates them, round-off aside) give ``kind == OverlapKind.NONE`` with zero area,
+        centroid, normal and width. A chord contact's polygon is walked from its two
+        crossings (:func:`_chord_polygon`); the clip (:func:`intersection_polygon`) and the
+        separating-axis test serve the fallback (a pair that overlaps has no separating
+        axis to stop that test early, and most pairs that reach here overlap).
     """
     p = np.asarray(p, dtype=np.float64)
     q = np.asarray(q, dtype=np.float64)
     none = Overlap(0.0, np.zeros(2), np.zeros(2), 0.0, OverlapKind.NONE)
+    points, entering, edge_p, edge_q = _crossings(p, q)
+    if len(points) == 2 and entering[0] != entering[1]:
+        e, x = (0, 1) if entering[0] else (1, 0)
+        chord = points[e] - points[x]
+        width = float(np.hypot(chord[0], chord[1]))
+        if width > 0.0:
+            poly = _chord_polygon(
+                p, q, points[e], points[x], (edge_p[e], edge_q[e]), (edge_p[x], edge_q[x])
+            )
+            area, centroid = _area_centroid(poly)
+            if area <= 0.0:
+                return none
+            normal = np.array([-chord[1], chord[0]]) / width
+            return Overlap(area, centroid, normal, width, OverlapKind.CHORD)
     poly = intersection_polygon(p, q)
     area, centroid = _area_centroid(poly)
     if area <= 0.0:
         return none
-    points, entering = boundary_crossings(p, q)
-    if len(points) == 2 and entering[0] != entering[1]:
-        enter, leave = (points[0], points[1]) if entering[0] else (points[1], points[0])
-        chord = enter - leave
-        width = float(np.hypot(chord[0], chord[1]))
-        if width > 0.0:
-            normal = np.array([-chord[1], chord[0]]) / width
-            return Overlap(area, centroid, normal, width, OverlapKind.CHORD)
     _depth, axis = min_penetration_axis(p, q)
     tangent = np.array([-axis[1], axis[0]])
     along = poly @ tangent

@@ -338,67 +338,98 @@ def overlap_normals_ti(
     normal = ti.math.vec2(0.0, 0.0)
     width = 0.0
     kind = OverlapKind.NONE
-    # The clip decides whether they overlap, and the separating-axis test runs only for the
-    # fallback's axis: the engine's pairs reach here past the two facing edges' test, and
-    # nearly all of them touch, where the full test found no axis after all of them (a fifth
-    # of a jammed pillar step, benchmarks/jam_step.py). Round-off aside, an axis separates
-    # two convex polygons exactly when their intersection has no area.
-    buf, start, count = _clip_ti(p, n_p, q, n_q)
-    # Fan from the first vertex, as polygon._area_centroid does.
-    origin = _row(buf, start)
-    twice_area = 0.0
-    moment = ti.math.vec2(0.0, 0.0)
-    for k in range(1, count - 1):
-        u = _row(buf, start + k) - origin
-        w = _row(buf, start + k + 1) - origin
+    # Where the two boundaries cross exactly twice, once where p's enters q (E) and once where
+    # it leaves (X), the overlap is E, p's vertices after E's edge up to X's, X, and q's
+    # vertices after X's edge up to E's: its area and centroid need no clip. The clip (and
+    # the separating-axis test, for the fallback's axis) serve every other case, separated
+    # pairs included (they do not cross): most of the engine's pairs here touch, as they
+    # reached here past the test of the two edges that face each other.
+    crossings = 0
+    entering_count = 0
+    enter = ti.math.vec2(0.0, 0.0)
+    leave = ti.math.vec2(0.0, 0.0)
+    enter_p, enter_q, leave_p, leave_q = 0, 0, 0, 0
+    # Boundary crossings, by the rule of polygon.boundary_crossings().
+    for j in range(n_q):
+        c = _row(q, j)
+        d = _row(q, _after(j, n_q))
+        cd = d - c
+        # Each vertex's side of q's edge line j once: the next edge's start is this
+        # one's end (the twin's sa and sb).
+        a = _row(p, 0)
+        sa = _cross_ti(cd, a - c)
+        first_side = sa
+        for i in range(n_p):
+            b = _row(p, _after(i, n_p))
+            sb = first_side
+            if i + 1 < n_p:
+                sb = _cross_ti(cd, b - c)
+            # Most edge pairs do not straddle each other's lines: test one first.
+            if (sa > 0.0) != (sb > 0.0):
+                ab = b - a
+                tc = _cross_ti(ab, c - a)
+                td = _cross_ti(ab, d - a)
+                if (tc > 0.0) != (td > 0.0):
+                    x = a + (sa / (sa - sb)) * ab
+                    if sb > 0.0:
+                        entering_count += 1
+                        enter = x
+                        enter_p, enter_q = i, j
+                    else:
+                        leave = x
+                        leave_p, leave_q = i, j
+                    crossings += 1
+            a = b
+            sa = sb
+    chord = enter - leave
+    chord_length = chord.norm()
+    if crossings == 2 and entering_count == 1 and chord_length > 0.0:
+        # Fan from E, as polygon._area_centroid fans from its first vertex.
+        twice_area = 0.0
+        moment = ti.math.vec2(0.0, 0.0)
+        u = ti.math.vec2(0.0, 0.0)
+        k = enter_p
+        while k != leave_p:
+            k = _after(k, n_p)
+            w = _row(p, k) - enter
+            cr = _cross_ti(u, w)
+            twice_area += cr
+            moment += (u + w) * cr
+            u = w
+        w = leave - enter
         cr = _cross_ti(u, w)
         twice_area += cr
         moment += (u + w) * cr
-    if twice_area > 0.0:
-        area = 0.5 * twice_area
-        centroid = origin + moment / (3.0 * twice_area)
-        # Boundary crossings, by the rule of polygon.boundary_crossings() (a chord needs two,
-        # one entering: their order does not matter).
-        crossings = 0
-        entering_count = 0
-        enter = ti.math.vec2(0.0, 0.0)
-        leave = ti.math.vec2(0.0, 0.0)
-        for j in range(n_q):
-            c = _row(q, j)
-            d = _row(q, _after(j, n_q))
-            cd = d - c
-            # Each vertex's side of q's edge line j once: the next edge's start is this
-            # one's end (the twin's sa and sb).
-            a = _row(p, 0)
-            sa = _cross_ti(cd, a - c)
-            first_side = sa
-            for i in range(n_p):
-                b = _row(p, _after(i, n_p))
-                sb = first_side
-                if i + 1 < n_p:
-                    sb = _cross_ti(cd, b - c)
-                # Most edge pairs do not straddle each other's lines: test one first.
-                if (sa > 0.0) != (sb > 0.0):
-                    ab = b - a
-                    tc = _cross_ti(ab, c - a)
-                    td = _cross_ti(ab, d - a)
-                    if (tc > 0.0) != (td > 0.0):
-                        x = a + (sa / (sa - sb)) * ab
-                        if sb > 0.0:
-                            entering_count += 1
-                            enter = x
-                        else:
-                            leave = x
-                        crossings += 1
-                a = b
-                sa = sb
-        chord = enter - leave
-        chord_length = chord.norm()
-        if crossings == 2 and entering_count == 1 and chord_length > 0.0:
+        u = w
+        k = leave_q
+        while k != enter_q:
+            k = _after(k, n_q)
+            w = _row(q, k) - enter
+            cr = _cross_ti(u, w)
+            twice_area += cr
+            moment += (u + w) * cr
+            u = w
+        if twice_area > 0.0:
+            area = 0.5 * twice_area
+            centroid = enter + moment / (3.0 * twice_area)
             kind = OverlapKind.CHORD
             width = chord_length
             normal = ti.math.vec2(-chord[1], chord[0]) / chord_length
-        else:
+    else:
+        buf, start, count = _clip_ti(p, n_p, q, n_q)
+        # Fan from the first vertex, as polygon._area_centroid does.
+        origin = _row(buf, start)
+        twice_area = 0.0
+        moment = ti.math.vec2(0.0, 0.0)
+        for k in range(1, count - 1):
+            u = _row(buf, start + k) - origin
+            w = _row(buf, start + k + 1) - origin
+            cr = _cross_ti(u, w)
+            twice_area += cr
+            moment += (u + w) * cr
+        if twice_area > 0.0:
+            area = 0.5 * twice_area
+            centroid = origin + moment / (3.0 * twice_area)
             kind = OverlapKind.FALLBACK
             _depth, axis = _min_penetration_axis_ti(p, p_normals, n_p, q, q_normals, n_q)
             normal = axis

@@ -418,8 +418,7 @@ def _lattice_pairs(count: int) -> list[tuple[np.ndarray, np.ndarray]]:
                 return check_polygon(np.array(ring)[:-1])
 
     return [
-        (lattice_polygon(), lattice_polygon() + rng.integers(-4, 5, size=2))
-        for _ in range(count)
+        (lattice_polygon(), lattice_polygon() + rng.integers(-4, 5, size=2)) for _ in range(count)
     ]
 
 

@@ -298,6 +298,29 @@ def _clip_ti(p: ti.template(), n_p, q: ti.template(), n_q):
 
 
 @ti.func
+def _fan_step_ti(u, w, twice_area, moment):
+    """A fan's triangle (its origin, ``u``, ``w``, relative to the origin) added to the sums of
+    twice the area and of the first moment (times 6), as polygon._area_centroid sums them."""
+    cr = _cross_ti(u, w)
+    return twice_area + cr, moment + (u + w) * cr
+
+
+@ti.func
+def _fan_along_ti(poly: ti.template(), start, stop, n, origin, u, twice_area, moment):
+    """The fan's triangles over ``poly``'s vertices after edge ``start`` up to the one that
+    starts edge ``stop`` (``n`` vertices; none when they are equal), ``u`` the last vertex
+    so far (relative to ``origin``); returns the last vertex and the sums."""
+    last, area2, first = u, twice_area, moment
+    k = start
+    while k != stop:
+        k = _after(k, n)
+        w = _row(poly, k) - origin
+        area2, first = _fan_step_ti(last, w, area2, first)
+        last = w
+    return last, area2, first
+
+
+@ti.func
 def overlap_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     """Taichi twin of :func:`polygon.overlap`: :func:`overlap_normals_ti` with the polygons'
     edge normals computed here."""
@@ -385,30 +408,13 @@ def overlap_normals_ti(
     chord_length = chord.norm()
     if crossings == 2 and entering_count == 1 and chord_length > 0.0:
         # Fan from E, as polygon._area_centroid fans from its first vertex.
-        twice_area = 0.0
-        moment = ti.math.vec2(0.0, 0.0)
-        u = ti.math.vec2(0.0, 0.0)
-        k = enter_p
-        while k != leave_p:
-            k = _after(k, n_p)
-            w = _row(p, k) - enter
-            cr = _cross_ti(u, w)
-            twice_area += cr
-            moment += (u + w) * cr
-            u = w
-        w = leave - enter
-        cr = _cross_ti(u, w)
-        twice_area += cr
-        moment += (u + w) * cr
-        u = w
-        k = leave_q
-        while k != enter_q:
-            k = _after(k, n_q)
-            w = _row(q, k) - enter
-            cr = _cross_ti(u, w)
-            twice_area += cr
-            moment += (u + w) * cr
-            u = w
+        u, twice_area, moment = _fan_along_ti(
+            p, enter_p, leave_p, n_p, enter, ti.math.vec2(0.0, 0.0), 0.0, ti.math.vec2(0.0, 0.0)
+        )
+        twice_area, moment = _fan_step_ti(u, leave - enter, twice_area, moment)
+        u, twice_area, moment = _fan_along_ti(
+            q, leave_q, enter_q, n_q, enter, leave - enter, twice_area, moment
+        )
         if twice_area > 0.0:
             area = 0.5 * twice_area
             centroid = enter + moment / (3.0 * twice_area)

@@ -11,7 +11,9 @@ law: runs the pillar to ``--at`` seconds (the jam carries load from about 10 s),
 state (``World.transfer``), and steps ``--steps`` steps from it ``--windows`` times (the
 same steps each time: the fastest and the median window per step); then times a whole run
 from 0 to 20 s after a first step that compiled, and hashes its positions and angles at 20 s
-(equal hashes: the trees' trajectories are the same bit for bit).
+(equal hashes: the trees' trajectories are the same bit for bit). A change that moves the
+trajectory gives each tree another jam at ``--at``; ``--same-state`` steps every tree from the
+first tree's (saved in ``--out`` by its first process, loaded by the others).
 
 Writes ``jam_step.json`` (every window and run, the trees' git revisions, the machine) and
 ``jam_step.png`` into ``--out``, and prints a line per run.
@@ -31,7 +33,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def worker(law_text: str, at: float, steps: int, windows: int) -> dict:
+def worker(
+    law_text: str, at: float, steps: int, windows: int, state_file: str = "", until: float = 20.0
+) -> dict:
     import hashlib
 
     import numpy as np
@@ -42,9 +46,17 @@ def worker(law_text: str, at: float, steps: int, windows: int) -> dict:
     backend.init("cpu", "f64")
     law = parse_law(law_text)
     sim = Simulation([load_scenario("pillar")], friction=law, arch="cpu", precision="f64")
-    sim.run(until=at)
     world = sim.world
-    state, done = world.transfer.read(), world.steps
+    if state_file and Path(state_file).is_file():  # the first tree's jam (--same-state)
+        sim.run(until=sim.dt)  # compiled (or loaded)
+        with np.load(state_file) as saved:
+            state = {name: saved[name] for name in saved.files if name != "_steps"}
+            done = int(saved["_steps"])
+    else:
+        sim.run(until=at)
+        state, done = world.transfer.read(), world.steps
+        if state_file:
+            np.savez(state_file, _steps=done, **state)
     per_step = []
     for _ in range(windows):
         world.transfer.write(state)
@@ -58,7 +70,7 @@ def worker(law_text: str, at: float, steps: int, windows: int) -> dict:
     run = Simulation([load_scenario("pillar")], friction=law, arch="cpu", precision="f64")
     run.run(until=run.dt)  # compiled (or loaded) and stepped once
     start = time.perf_counter()
-    run.run(until=20.0)
+    run.run(until=until)
     stepping = time.perf_counter() - start
     end = run.world
     digest = hashlib.sha1(end.positions().tobytes() + end.angles().tobytes()).hexdigest()
@@ -93,11 +105,20 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3, help="fresh processes per tree and law")
     ap.add_argument("--at", type=float, default=15.0, help="the jam's state: seconds run first")
     ap.add_argument("--steps", type=int, default=2000, help="steps a timed window")
+    ap.add_argument("--until", type=float, default=20.0, help="the whole run's end (s)")
     ap.add_argument("--windows", type=int, default=9, help="timed windows from that state")
+    ap.add_argument(
+        "--same-state",
+        action="store_true",
+        help="step every tree from the first tree's jam (saved in --out), not its own: for "
+        "changes that move the trajectory (their jams at --at differ)",
+    )
     ap.add_argument("--worker", help=argparse.SUPPRESS)
+    ap.add_argument("--state-file", default="", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
-        print(json.dumps(worker(args.worker, args.at, args.steps, args.windows)))
+        row = worker(args.worker, args.at, args.steps, args.windows, args.state_file, args.until)
+        print(json.dumps(row))
         return 0
 
     trees = [t.resolve() for t in args.trees]
@@ -106,13 +127,19 @@ def main(argv=None) -> int:
             print(f"--trees: {tree} holds no taichi_ice package (a checkout of the repository)")
             return 2
     args.out.mkdir(parents=True, exist_ok=True)
+    for stale in args.out.glob("state-*.npz"):  # an earlier run's jam: the first tree saves anew
+        stale.unlink()
     runs = []
     for law in args.laws.split(","):
         for r in range(args.rounds):
             for tree in trees:
                 env = {**os.environ, "PYTHONPATH": str(tree)}
                 cmd = [sys.executable, __file__, "--at", str(args.at), "--steps", str(args.steps)]
-                cmd += ["--windows", str(args.windows), "--worker", law]
+                cmd += ["--windows", str(args.windows), "--until", str(args.until)]
+                cmd += ["--worker", law]
+                if args.same_state:
+                    name = "state-" + "".join(c if c.isalnum() else "_" for c in law) + ".npz"
+                    cmd += ["--state-file", str((args.out / name).resolve())]
                 proc = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=tree)
                 if proc.returncode != 0:
                     print(proc.stderr[-2000:], file=sys.stderr)
@@ -123,13 +150,16 @@ def main(argv=None) -> int:
                 print(
                     f"{law:12s} {row['git']:>16s}  jam {row['jam_fastest_us']:5.1f} us a step "
                     f"(median {row['jam_median_us']:5.1f}; {row['jam_contacts']} contacts)  "
-                    f"20 s run: {row['run_stepping_s']:5.2f} s stepping, {row['run_hash']}",
+                    f"run to {args.until:g} s: {row['run_stepping_s']:5.2f} s stepping, "
+                    f"{row['run_hash']}",
                     flush=True,
                 )
     (args.out / "jam_step.json").write_text(
         json.dumps(
             {"machine": platform.platform(), "cpus": os.cpu_count(), "at": args.at,
-             "steps": args.steps, "windows": args.windows, "runs": runs},
+             "steps": args.steps, "windows": args.windows, "until": args.until,
+             "same_state": args.same_state,
+             "runs": runs},
             indent=1,
         )
     )  # fmt: skip

@@ -264,3 +264,27 @@ def test_integrator_and_step_are_options(tmp_path, capsys):
         assert stop.value.code == 2
         said = capsys.readouterr().err
         assert f"{bad!r}: give a fraction of the stability limit in (0, 1]" in said
+
+
+def test_jam_step_steps_every_tree_from_the_first_trees_jam(tmp_path):
+    """benchmarks/jam_step.py --same-state runs end to end: the first process saves its jam
+    (at --at), the second loads it instead of running there, and both write their rows."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, str(root / "benchmarks" / "jam_step.py"), "--out", str(tmp_path)]
+    cmd += ["--trees", str(root), str(root), "--laws", "coulomb:0.9", "--rounds", "1"]
+    cmd += ["--at", "0.05", "--steps", "50", "--windows", "2", "--until", "0.1", "--same-state"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=root, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    record = json.loads((tmp_path / "jam_step.json").read_text())
+    assert record["same_state"] and record["until"] == 0.1
+    first, second = record["runs"]
+    assert first["run_steps"] == second["run_steps"] > 0
+    assert first["run_hash"] == second["run_hash"]  # one engine
+    assert first["jam_contacts"] == second["jam_contacts"]
+    with np.load(tmp_path / "state-coulomb_0_9.npz") as saved:
+        assert 0 < int(saved["_steps"]) < first["run_steps"]  # at 0.05 s of the run's 0.1
+    assert (tmp_path / "jam_step.png").is_file()

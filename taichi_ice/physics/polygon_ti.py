@@ -219,8 +219,9 @@ def _reach_past_ti(a, n, other: ti.template(), n_other):
 def sat_separated_ti(p: ti.template(), n_p, q: ti.template(), n_q):
     """Taichi twin of :func:`polygon.sat_separated`: True (1) when an edge line separates p and q.
 
-    Same arguments as :func:`min_penetration_axis_ti`; use it to reject a candidate pair
-    before :func:`overlap_ti` (which runs the same test first).
+    Same arguments as :func:`min_penetration_axis_ti`. :func:`overlap_ti` does not run it
+    first: most pairs that reach an overlap touch, where the test runs every axis to find
+    none; a separated pair has no crossing and its clip no area.
     """
     depth, _axis = min_penetration_axis_ti(p, n_p, q, n_q)
     return depth <= 0.0

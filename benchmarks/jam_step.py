@@ -52,11 +52,14 @@ def worker(
         with np.load(state_file) as saved:
             state = {name: saved[name] for name in saved.files if name != "_steps"}
             done = int(saved["_steps"])
+        origin = "loaded"
     else:
         sim.run(until=at)
         state, done = world.transfer.read(), world.steps
+        origin = "own"
         if state_file:
             np.savez(state_file, _steps=done, **state)
+            origin = "saved"
     per_step = []
     for _ in range(windows):
         world.transfer.write(state)
@@ -79,6 +82,7 @@ def worker(
         "jam_fastest_us": 1e6 * min(per_step),
         "jam_median_us": 1e6 * float(np.median(per_step)),
         "jam_contacts": contacts,
+        "jam_state": origin,  # its own jam, or saved for the other trees, or loaded
         "run_steps": int(run.world.steps),
         "run_stepping_s": stepping,
         "run_hash": digest[:12],

@@ -282,6 +282,7 @@ def test_jam_step_steps_every_tree_from_the_first_trees_jam(tmp_path):
     record = json.loads((tmp_path / "jam_step.json").read_text())
     assert record["same_state"] and record["until"] == 0.1
     first, second = record["runs"]
+    assert (first["jam_state"], second["jam_state"]) == ("saved", "loaded")
     assert first["run_steps"] == second["run_steps"] > 0
     assert first["run_hash"] == second["run_hash"]  # one engine
     assert first["jam_contacts"] == second["jam_contacts"]

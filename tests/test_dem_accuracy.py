@@ -133,6 +133,54 @@ def test_quick_study_runs_and_its_collisions_match_the_ode(tmp_path):
     assert len(residuals) == 1 and residuals[0] < BUDGET_RTOL
 
 
+def test_worker_processes_give_the_runs_of_this_process_bit_for_bit(tmp_path):
+    """The study's worker processes (a process per precision and integrator, their indexes
+    merged into one per precision) run what this process runs, to the last bit: every
+    state, series and error of ``--quick``, run here and in a worker; ``reuse`` reads the
+    merged index."""
+    import numpy as np
+
+    here = dem_accuracy.run(tmp_path / "here", quick=True)
+    cfg = dem_accuracy.config(quick=True)
+    parts = dem_accuracy._spawned(tmp_path / "spawned", cfg, ["f64"], None, 1, lambda _m: None)
+    ours = json.loads((tmp_path / "here" / "dem_runs" / "f64" / "index.json").read_text())
+    theirs = parts["f64"]
+    assert [w["integrator"] for w in theirs["workers"]] == ["euler"]
+    assert len(theirs["records"]) == len(ours["records"]) > 0
+    timing = {"wall_s", "wall_per_step_s", "wall_per_simulated_s"}
+    for mine, spawned in zip(ours["records"], theirs["records"]):
+        assert {k: v for k, v in mine.items() if k not in timing | {"arrays"}} == {
+            k: v for k, v in spawned.items() if k not in timing | {"arrays"}
+        }
+        if "arrays" in mine:
+            assert spawned["arrays"] == f"euler/{mine['arrays']}"
+            with np.load(tmp_path / "here" / "dem_runs" / "f64" / mine["arrays"]) as a:
+                path = tmp_path / "spawned" / "dem_runs" / "f64" / spawned["arrays"]
+                with np.load(path) as b:
+                    assert sorted(a.files) == sorted(b.files)
+                    for name in a.files:
+                        assert np.array_equal(a[name], b[name], equal_nan=True), name
+    again = dem_accuracy.run(tmp_path / "spawned", quick=True, reuse=True)
+    assert [(p["scene"], p["measure"], p["error"]) for p in again["points"]] == [
+        (p["scene"], p["measure"], p["error"]) for p in here["points"]
+    ]
+
+
+def test_a_failed_worker_stops_the_others_and_names_its_command(tmp_path):
+    """``_run_workers``: a worker that exits non-zero raises with its exit code and command,
+    and the worker still running is stopped, not waited for (it would sleep 60 s)."""
+    import sys
+    import time
+
+    sleeper = [sys.executable, "-c", "import time; time.sleep(60)"]
+    failing = [sys.executable, "-c", "import sys; sys.exit(3)"]
+    jobs = [("f64", "euler", tmp_path, sleeper), ("f64", "coupled", tmp_path, failing)]
+    start = time.perf_counter()
+    with pytest.raises(RuntimeError, match=r"exit 3\).*sys\.exit\(3\)"):
+        dem_accuracy._run_workers(jobs, 2, lambda _m: None)
+    assert time.perf_counter() - start < 30
+
+
 def test_timing_runs_the_span_beyond_where_the_run_stopped():
     """``_timed`` times ``span`` more seconds: a run already past the span still steps
     (``Simulation.run`` takes the time to reach, not a duration)."""

@@ -34,10 +34,13 @@ Simulation takes the World of the last one of its layout from the process's pool
 (``engine.pool``), so a new dt reloads a World instead of compiling one: the study compiles
 once per layout and integrator.
 
-Taichi holds one precision per process: each precision runs in its own worker process
-(``python -m taichi_ice.commands.validate dem_accuracy --worker f32 ...``; ``--quick`` runs
-in this process when it already runs Taichi on the CPU in float64). The workers write the
-runs (``npz``) into ``DIR/dem_runs/``; the analysis (``dem_analysis``) and charts
+Taichi holds one precision per process: each precision and integrator runs in its own
+worker process (``python -m taichi_ice.commands.validate dem_accuracy --worker f32
+--integrators euler ...``; ``--quick`` runs in this process when it already runs Taichi on
+the CPU in float64), as many at a time as the cores (``run(workers=...)``): the jobs share no
+kernel, and the timed runs are a world alone, a thread each. The workers write the runs
+(``npz``) into ``DIR/dem_runs/<precision>/<integrator>/``, and the study merges their indexes
+into ``DIR/dem_runs/<precision>/index.json``; the analysis (``dem_analysis``) and charts
 (``dem_charts``) read them.
 
 Writes ``dem_accuracy.json``, ``dem_accuracy.md`` (its numbers as tables),
@@ -431,28 +434,105 @@ def _jsonable(x):
     raise TypeError(type(x))
 
 
-def _spawn(precision: str, folder: Path, quick: bool, until: float | None, integrators) -> dict:
-    root = str(Path(__file__).resolve().parents[3])  # the folder that holds taichi_ice/
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+def _command(precision: str, folder: Path, quick: bool, until: float | None, integrator: str):
+    """The command line of a worker: one precision and one integrator into ``folder``."""
     cmd = [
         sys.executable,
         "-m",
-        "taichi_ice.commands.validate",  # the study's command line, a worker per precision
+        "taichi_ice.commands.validate",  # the study's command line, a worker per job
         "dem_accuracy",
         "--worker",
         precision,
         "--out",
         str(folder),
+        "--integrators",
+        integrator,
     ] + (["--quick"] if quick else [])
     if until is not None:
         cmd += ["--until", str(until)]
-    if integrators is not None:
-        cmd += ["--integrators", ",".join(integrators)]
-    proc = subprocess.run(cmd, env=env, check=False)
-    if proc.returncode != 0:
-        raise RuntimeError(f"dem accuracy worker for {precision} failed: {' '.join(cmd)}")
-    return json.loads((folder / "index.json").read_text())
+    return cmd
+
+
+def _run_workers(jobs: list[tuple[str, str, Path, list[str]]], slots: int, log) -> None:
+    """Run the workers' command lines, at most ``slots`` at a time, in the order given
+    (longest first: the last to start are the shortest). ``jobs``: (precision, integrator,
+    folder, command). A worker that fails stops the others (what they wrote stays) and
+    raises, naming its command."""
+    root = str(Path(__file__).resolve().parents[3])  # the folder that holds taichi_ice/
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+    waiting, running = list(jobs), []
+    try:
+        while waiting or running:
+            while waiting and len(running) < slots:
+                precision, integrator, _folder, cmd = waiting.pop(0)
+                log(f"dem accuracy: {precision} {integrator} worker process ...")
+                running.append((subprocess.Popen(cmd, env=env), cmd))
+            time.sleep(0.2)
+            for proc, cmd in list(running):
+                code = proc.poll()
+                if code is None:
+                    continue
+                running.remove((proc, cmd))
+                if code != 0:
+                    raise RuntimeError(f"dem accuracy worker failed (exit {code}): {' '.join(cmd)}")
+    finally:
+        for proc, _cmd in running:
+            proc.terminate()
+            proc.wait()
+
+
+def _spawned(
+    out_dir: Path, cfg: dict[str, Any], precisions: list[str], until: float | None, slots: int, log
+) -> dict[str, dict]:
+    """Every run of ``precisions`` in worker processes, a process for each precision and
+    integrator, ``slots`` at a time; returns each precision's merged index (also written to
+    ``out_dir/dem_runs/<precision>/index.json``, which ``reuse`` reads).
+
+    A fresh process for each, whatever this one runs: Taichi holds one precision per process
+    and compiles faster in a process with few kernels, and the jobs share no kernel (each
+    integrator compiles its own). The timed runs are a world alone, a thread each, so as
+    many run at a time as there are cores. Longest first: float64 before float32, the
+    analytic steps before Euler."""
+    order = {"midstep": 0, "coupled": 1, "analytic": 2, "euler": 3}
+    jobs = [
+        (p, i, out_dir / "dem_runs" / p / i)
+        for p in precisions
+        for i in sorted(cfg["integrators"], key=lambda i: order.get(i, len(order)))
+    ]
+    jobs.sort(key=lambda job: job[0] != "f64")
+    _run_workers(
+        [(p, i, folder, _command(p, folder, cfg["quick"], until, i)) for p, i, folder in jobs],
+        slots,
+        log,
+    )
+    parts = {}
+    for p in precisions:
+        mine = [
+            (i, json.loads((out_dir / "dem_runs" / p / i / "index.json").read_text()))
+            for i in cfg["integrators"]  # the records in the study's order of integrators
+        ]
+        parts[p] = _merged(p, mine)
+        index = out_dir / "dem_runs" / p / "index.json"
+        index.write_text(json.dumps(parts[p], default=_jsonable))
+    return parts
+
+
+def _merged(precision: str, parts: list[tuple[str, dict]]) -> dict:
+    """One precision's index from its integrators' workers (``parts``: integrator, index):
+    their records in order, each ``arrays`` path relative to the precision's folder."""
+    index: dict[str, Any] = {"precision": precision, "records": [], "workers": []}
+    for integrator, part in parts:
+        for record in part["records"]:
+            if "arrays" in record:
+                record = {**record, "arrays": f"{integrator}/{record['arrays']}"}
+            index["records"].append(record)
+        if "stability" in part:
+            index.setdefault("stability", {}).update(part["stability"])
+        index["advanced_optimization"] = part.get("advanced_optimization")
+        index["optimize"] = part.get("optimize")
+        index["workers"].append({"integrator": integrator, "wall_s": part.get("wall_s")})
+    return index
 
 
 # --------------------------------------------------------------------------------------------
@@ -467,6 +547,7 @@ def run(
     until: float | None = None,
     reuse: bool = False,
     integrators: tuple[str, ...] | None = None,
+    workers: int | None = None,
 ) -> dict:
     """Every run, then the analysis, chart and JSON; returns the JSON summary as a dict.
 
@@ -477,6 +558,8 @@ def run(
         integrators: those compared (default ``INTEGRATORS``; quick: Euler alone).
         reuse: analyse the runs already in ``out_dir/dem_runs`` (from an earlier call with
             the same settings) instead of running them again.
+        workers: worker processes at a time, one per precision and integrator (default: the
+            cores this process may use, ``backend.usable_cores``).
     """
     from ... import backend
     from ...errors import TaichiIceError
@@ -494,6 +577,7 @@ def run(
     cfg = config(quick, until, integrators)
     start = time.perf_counter()
     parts = {}
+    spawn = []
     for precision in cfg["precisions"]:
         folder = out_dir / "dem_runs" / precision
         if reuse:
@@ -501,10 +585,9 @@ def run(
         elif quick and backend.current() == ("cpu", precision):
             parts[precision] = worker(precision, folder, cfg, log=log)  # two runs: here
         else:
-            # A fresh process for each precision, whatever this one runs: Taichi holds one
-            # precision per process, and compiles faster in a process with few kernels.
-            log(f"dem accuracy: {precision} worker process ...")
-            parts[precision] = _spawn(precision, folder, quick, until, integrators)
+            spawn.append(precision)
+    if spawn:
+        parts.update(_spawned(out_dir, cfg, spawn, until, workers or backend.usable_cores(), log))
     summary = dem_analysis.analyse(parts, out_dir / "dem_runs", cfg, log=log)
     summary["wall_s"] = time.perf_counter() - start
     summary["advanced_optimization"] = {

@@ -129,3 +129,43 @@ def test_crushing_budget_closes(f64, strength):
         assert crushed[k] > 0.1 * work[k], name  # the strength did cap forces
         assert work[k] > 0.0, name
         assert np.max(np.abs(res[:, k])) < RESIDUAL_RTOL * work[k], name
+
+
+def test_a_launchs_samples_judged_at_once_as_one_by_one():
+    """``Simulation.run`` judges a launch's samples at once (``budget.breaches`` over
+    ``(S, W, E)``, ``World.tripped`` over ``(S, W, len(Status))``) and judges alone only
+    the samples found wanting: the two must find the same samples. Seeded random tables,
+    a third of them made to create energy; status words against the rule they encode."""
+    from types import SimpleNamespace
+
+    from taichi_ice.codes import EnergyTerm, Status
+
+    rng = np.random.default_rng(30)
+    samples, worlds, terms = 40, 5, len(budget.SERIES)
+    initial = rng.uniform(0.0, 10.0, (worlds, terms))
+    table = rng.uniform(0.0, 10.0, (samples, worlds, terms))
+    created = rng.random((samples, worlds)) < 1 / 3
+    table[..., EnergyTerm.KINETIC] += np.where(created, 1e3, 0.0)
+    at_once = budget.breaches(table, initial)
+    for s in range(samples):
+        assert set(np.flatnonzero(at_once[s])) == set(budget.breached(table[s], initial))
+    assert 0 < at_once.sum() < at_once.size
+
+    layout = SimpleNamespace(slots=8, nbr_len=16)
+    status = np.zeros((samples, worlds, len(Status)))
+    status[..., Status.SLOT_OVERFLOW] = rng.integers(0, 10, (samples, worlds))
+    status[..., Status.LIST_OVERFLOW] = rng.integers(0, 18, (samples, worlds))
+    status[..., Status.NONFINITE] = rng.random((samples, worlds)) < 0.05
+    status[..., Status.RUNAWAY] = rng.random((samples, worlds)) < 0.05
+    tripped = World.tripped(SimpleNamespace(layout=layout), status)
+    for s in range(samples):
+        for w in range(worlds):
+            word = status[s, w]
+            rule = (
+                word[Status.SLOT_OVERFLOW] > 8
+                or word[Status.LIST_OVERFLOW] > 16
+                or word[Status.NONFINITE] != 0
+                or word[Status.RUNAWAY] != 0
+            )
+            assert bool(tripped[s, w]) == rule
+    assert 0 < tripped.sum() < tripped.size

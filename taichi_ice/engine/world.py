@@ -335,17 +335,23 @@ class World:
         words)."""
         self.raise_for(self.data.status.to_numpy()[: len(self.scenes)], self.time)
 
+    def tripped(self, status: np.ndarray) -> np.ndarray:
+        """Which status words ``(..., len(Status))`` ``raise_for`` raises for (a bool array
+        over the leading axes: the samples of a launch, their worlds)."""
+        status = np.asarray(status).astype(np.int64)
+        return (
+            (status[..., Status.SLOT_OVERFLOW] > self.layout.slots)
+            | (status[..., Status.LIST_OVERFLOW] > self.layout.nbr_len)
+            | (status[..., Status.NONFINITE] != 0)
+            | (status[..., Status.RUNAWAY] != 0)
+        )
+
     def raise_for(self, status: np.ndarray, time: float) -> None:
         """Raise CapacityError or DivergenceError for ``(W, len(Status))`` status words (one
         per world, as ``check`` reads them or a sample holds them) read at ``time`` (s)."""
         status = np.asarray(status).astype(np.int64).reshape(-1, len(Status))
         where = ""
-        bad = np.flatnonzero(
-            (status[:, Status.SLOT_OVERFLOW] > self.layout.slots)
-            | (status[:, Status.LIST_OVERFLOW] > self.layout.nbr_len)
-            | (status[:, Status.NONFINITE] != 0)
-            | (status[:, Status.RUNAWAY] != 0)
-        )
+        bad = np.flatnonzero(self.tripped(status))
         if not bad.size:
             return
         w = int(bad[0])

@@ -145,9 +145,15 @@ def breached(table: np.ndarray, initial: np.ndarray) -> np.ndarray:
         The worlds whose kinetic energy plus what they dissipated exceeds what came in by
         more than ``BREACH`` times it, plus ``BREACH_FLOOR`` (``created``).
     """
+    return np.nonzero(breaches(table, initial))[0]
+
+
+def breaches(table: np.ndarray, initial: np.ndarray) -> np.ndarray:
+    """``breached`` as a bool array over the leading axes of ``table`` (``(..., W, E)``: the
+    samples of a launch at once), ``initial`` ``(W, E)``."""
     now, start = as_series(table), as_series(initial)
     came = np.maximum(came_in(now, start), 0.0)
-    return np.nonzero(created(now, start) > BREACH * came + BREACH_FLOOR)[0]
+    return created(now, start) > BREACH * came + BREACH_FLOOR
 
 
 __all__ = [
@@ -159,6 +165,7 @@ __all__ = [
     "WORK",
     "as_series",
     "breached",
+    "breaches",
     "came_in",
     "created",
     "relative_residual",

@@ -198,6 +198,7 @@ class Simulation:
             )
         # Kinetic and elastic energy at t = 0: the budget's starting capital.
         self.initial_energy = self.world.energies().copy()
+        self._probe_slices = None  # the worlds' probe rows, as _sample first reads them
 
     # ----------------------------------------------------------------------------------------
 
@@ -401,12 +402,20 @@ class Simulation:
                         ends.append(at)
                         plan.append((n, int(at % self.series_every == 0 or at == n_end)))
                     rows, impulses = self.world.advance_sampled(plan)
+                    # The launch's samples judged at once (the status words, the budget);
+                    # only a sample found wanting is judged again, alone, to raise.
+                    tripped = self.world.tripped(rows[:, :, STATUS_COLUMN:]).any(axis=1)
+                    breach = budget.breaches(rows[:, :, :CONTACTS_COLUMN], self.initial_energy)
+                    breach = breach.any(axis=1)
                     for s, ((_n, record), end) in enumerate(zip(plan, ends)):
                         seen = end
-                        self._check_status(rows[s, :, STATUS_COLUMN:], end * self.dt)
+                        if tripped[s]:
+                            self._check_status(rows[s, :, STATUS_COLUMN:], end * self.dt)
                         if record:
                             since = end % self.series_every or self.series_every
-                            self._sample(series, writers, rows[s], impulses[s], end, since)
+                            self._sample(
+                                series, writers, rows[s], impulses[s], end, since, breach[s]
+                            )
                     k = ends[-1]
                     bar.update(k)
                     if k % self.frame_every == 0:
@@ -520,13 +529,19 @@ class Simulation:
             failure=failure,
         )
 
-    def _sample(self, series, writers, rows, impulses, steps: int, since: int) -> None:
+    def _sample(
+        self, series, writers, rows, impulses, steps: int, since: int, breach: bool = True
+    ) -> None:
         """Record one sample of every world, taken after ``steps`` steps: ``rows`` ``(W,
         SAMPLE_COLUMNS)`` and the probes' ``impulses`` ``(P, 2)`` over the ``since`` steps
-        since the last sample (``World.advance_sampled``); the probe force is their mean."""
+        since the last sample (``World.advance_sampled``); the probe force is their mean.
+        Then the budget's check, unless ``breach`` is False (``budget.breaches`` found none
+        on these rows already)."""
         t = steps * self.dt
         energies = rows[:, :CONTACTS_COLUMN]
-        for w, (s, probes) in enumerate(zip(series, self.world.probe_slices())):
+        if self._probe_slices is None:
+            self._probe_slices = self.world.probe_slices()
+        for w, (s, probes) in enumerate(zip(series, self._probe_slices)):
             force = impulses[probes] / (since * self.dt) if since else impulses[probes] * 0
             contacts = int(rows[w, CONTACTS_COLUMN])
             row = (t, force, contacts, *energies[w])
@@ -534,7 +549,8 @@ class Simulation:
                 s[key].append(value)
             if writers:
                 writers[w].add_sample(t, force, energies[w], contacts)
-        self._check_budget(energies, t)
+        if breach:
+            self._check_budget(energies, t)
 
     def _check_budget(self, energies: np.ndarray, time: float | None = None) -> None:
         """Raise DivergenceError if a world's kinetic energy and what it dissipated far

@@ -18,7 +18,7 @@ import pytest
 
 from taichi_ice import backend
 from taichi_ice.commands.cli import main
-from taichi_ice.experiments.validation import collision_ode, dem_accuracy, dem_scenes
+from taichi_ice.experiments.validation import collision_ode, dem_accuracy, dem_scenes, dem_workers
 from taichi_ice.tomlio import dump_toml
 
 # DOP853 at rtol 1e-11 on the overlap geometry against the scalar ODE of the same oscillator:
@@ -142,7 +142,7 @@ def test_worker_processes_give_the_runs_of_this_process_bit_for_bit(tmp_path):
 
     here = dem_accuracy.run(tmp_path / "here", quick=True)
     cfg = dem_accuracy.config(quick=True)
-    parts = dem_accuracy._spawned(tmp_path / "spawned", cfg, ["f64"], None, 1, lambda _m: None)
+    parts = dem_workers.spawned(tmp_path / "spawned", cfg, ["f64"], None, 1, lambda _m: None)
     ours = json.loads((tmp_path / "here" / "dem_runs" / "f64" / "index.json").read_text())
     theirs = parts["f64"]
     assert [w["integrator"] for w in theirs["workers"]] == ["euler"]
@@ -167,8 +167,9 @@ def test_worker_processes_give_the_runs_of_this_process_bit_for_bit(tmp_path):
 
 
 def test_a_failed_worker_stops_the_others_and_names_its_command(tmp_path):
-    """``_run_workers``: a worker that exits non-zero raises with its exit code and command,
-    and the worker still running is stopped, not waited for (it would sleep 60 s)."""
+    """``dem_workers.run_workers``: a worker that exits non-zero raises with its exit code
+    and command, and the worker still running is stopped, not waited for (it would sleep
+    60 s)."""
     import sys
     import time
 
@@ -177,7 +178,7 @@ def test_a_failed_worker_stops_the_others_and_names_its_command(tmp_path):
     jobs = [("f64", "euler", tmp_path, sleeper), ("f64", "coupled", tmp_path, failing)]
     start = time.perf_counter()
     with pytest.raises(RuntimeError, match=r"exit 3\).*sys\.exit\(3\)"):
-        dem_accuracy._run_workers(jobs, 2, lambda _m: None)
+        dem_workers.run_workers(jobs, 2, lambda _m: None)
     assert time.perf_counter() - start < 30
 
 

@@ -198,7 +198,7 @@ class Simulation:
             )
         # Kinetic and elastic energy at t = 0: the budget's starting capital.
         self.initial_energy = self.world.energies().copy()
-        self._probe_slices = None  # the worlds' probe rows, as _sample first reads them
+        self._probe_slices = self.world.probe_slices()  # each world's probe rows
 
     # ----------------------------------------------------------------------------------------
 
@@ -405,17 +405,15 @@ class Simulation:
                     # The launch's samples judged at once (the status words, the budget);
                     # only a sample found wanting is judged again, alone, to raise.
                     tripped = self.world.tripped(rows[:, :, STATUS_COLUMN:]).any(axis=1)
-                    breach = budget.breaches(rows[:, :, :CONTACTS_COLUMN], self.initial_energy)
-                    breach = breach.any(axis=1)
+                    bad = budget.breaches(rows[:, :, :CONTACTS_COLUMN], self.initial_energy)
+                    bad = bad.any(axis=1)  # energy created: the budget's check raises
                     for s, ((_n, record), end) in enumerate(zip(plan, ends)):
                         seen = end
                         if tripped[s]:
                             self._check_status(rows[s, :, STATUS_COLUMN:], end * self.dt)
                         if record:
                             since = end % self.series_every or self.series_every
-                            self._sample(
-                                series, writers, rows[s], impulses[s], end, since, breach[s]
-                            )
+                            self._sample(series, writers, rows[s], impulses[s], end, since, bad[s])
                     k = ends[-1]
                     bar.update(k)
                     if k % self.frame_every == 0:
@@ -529,9 +527,7 @@ class Simulation:
             failure=failure,
         )
 
-    def _sample(
-        self, series, writers, rows, impulses, steps: int, since: int, breach: bool = True
-    ) -> None:
+    def _sample(self, series, writers, rows, impulses, steps, since, breach=True) -> None:
         """Record one sample of every world, taken after ``steps`` steps: ``rows`` ``(W,
         SAMPLE_COLUMNS)`` and the probes' ``impulses`` ``(P, 2)`` over the ``since`` steps
         since the last sample (``World.advance_sampled``); the probe force is their mean.
@@ -539,8 +535,6 @@ class Simulation:
         on these rows already)."""
         t = steps * self.dt
         energies = rows[:, :CONTACTS_COLUMN]
-        if self._probe_slices is None:
-            self._probe_slices = self.world.probe_slices()
         for w, (s, probes) in enumerate(zip(series, self._probe_slices)):
             force = impulses[probes] / (since * self.dt) if since else impulses[probes] * 0
             contacts = int(rows[w, CONTACTS_COLUMN])

@@ -51,8 +51,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -62,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from . import dem_scenes
+from .dem_workers import jsonable, spawned
 
 LAWS = ("coulomb", "rate-state")
 INTEGRATORS = ("euler", "analytic", "coupled", "midstep")  # engine.options.INTEGRATORS
@@ -420,118 +419,7 @@ def worker(precision: str, folder: Path, cfg: dict[str, Any], log) -> dict[str, 
             i: dem_stability.run_all(log=log, integrator=i) for i in cfg["integrators"]
         }
     index["wall_s"] = time.perf_counter() - start
-    (folder / "index.json").write_text(json.dumps(index, default=_jsonable))
-    return index
-
-
-def _jsonable(x):
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, tuple):
-        return list(x)
-    raise TypeError(type(x))
-
-
-def _command(precision: str, folder: Path, quick: bool, until: float | None, integrator: str):
-    """The command line of a worker: one precision and one integrator into ``folder``."""
-    cmd = [
-        sys.executable,
-        "-m",
-        "taichi_ice.commands.validate",  # the study's command line, a worker per job
-        "dem_accuracy",
-        "--worker",
-        precision,
-        "--out",
-        str(folder),
-        "--integrators",
-        integrator,
-    ] + (["--quick"] if quick else [])
-    if until is not None:
-        cmd += ["--until", str(until)]
-    return cmd
-
-
-def _run_workers(jobs: list[tuple[str, str, Path, list[str]]], slots: int, log) -> None:
-    """Run the workers' command lines, at most ``slots`` at a time, in the order given
-    (longest first: the last to start are the shortest). ``jobs``: (precision, integrator,
-    folder, command). A worker that fails stops the others (what they wrote stays) and
-    raises, naming its command."""
-    root = str(Path(__file__).resolve().parents[3])  # the folder that holds taichi_ice/
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
-    waiting, running = list(jobs), []
-    try:
-        while waiting or running:
-            while waiting and len(running) < slots:
-                precision, integrator, _folder, cmd = waiting.pop(0)
-                log(f"dem accuracy: {precision} {integrator} worker process ...")
-                running.append((subprocess.Popen(cmd, env=env), cmd))
-            time.sleep(0.2)
-            for proc, cmd in list(running):
-                code = proc.poll()
-                if code is None:
-                    continue
-                running.remove((proc, cmd))
-                if code != 0:
-                    raise RuntimeError(f"dem accuracy worker failed (exit {code}): {' '.join(cmd)}")
-    finally:
-        for proc, _cmd in running:
-            proc.terminate()
-            proc.wait()
-
-
-def _spawned(
-    out_dir: Path, cfg: dict[str, Any], precisions: list[str], until: float | None, slots: int, log
-) -> dict[str, dict]:
-    """Every run of ``precisions`` in worker processes, a process for each precision and
-    integrator, ``slots`` at a time; returns each precision's merged index (also written to
-    ``out_dir/dem_runs/<precision>/index.json``, which ``reuse`` reads).
-
-    A fresh process for each, whatever this one runs: Taichi holds one precision per process
-    and compiles faster in a process with few kernels, and the jobs share no kernel (each
-    integrator compiles its own). The timed runs are a world alone, a thread each, so as
-    many run at a time as there are cores. Longest first: float64 before float32, the
-    analytic steps before Euler."""
-    order = {"midstep": 0, "coupled": 1, "analytic": 2, "euler": 3}
-    jobs = [
-        (p, i, out_dir / "dem_runs" / p / i)
-        for p in precisions
-        for i in sorted(cfg["integrators"], key=lambda i: order.get(i, len(order)))
-    ]
-    jobs.sort(key=lambda job: job[0] != "f64")
-    _run_workers(
-        [(p, i, folder, _command(p, folder, cfg["quick"], until, i)) for p, i, folder in jobs],
-        slots,
-        log,
-    )
-    parts = {}
-    for p in precisions:
-        mine = [
-            (i, json.loads((out_dir / "dem_runs" / p / i / "index.json").read_text()))
-            for i in cfg["integrators"]  # the records in the study's order of integrators
-        ]
-        parts[p] = _merged(p, mine)
-        index = out_dir / "dem_runs" / p / "index.json"
-        index.write_text(json.dumps(parts[p], default=_jsonable))
-    return parts
-
-
-def _merged(precision: str, parts: list[tuple[str, dict]]) -> dict:
-    """One precision's index from its integrators' workers (``parts``: integrator, index):
-    their records in order, each ``arrays`` path relative to the precision's folder."""
-    index: dict[str, Any] = {"precision": precision, "records": [], "workers": []}
-    for integrator, part in parts:
-        for record in part["records"]:
-            if "arrays" in record:
-                record = {**record, "arrays": f"{integrator}/{record['arrays']}"}
-            index["records"].append(record)
-        if "stability" in part:
-            index.setdefault("stability", {}).update(part["stability"])
-        index["advanced_optimization"] = part.get("advanced_optimization")
-        index["optimize"] = part.get("optimize")
-        index["workers"].append({"integrator": integrator, "wall_s": part.get("wall_s")})
+    (folder / "index.json").write_text(json.dumps(index, default=jsonable))
     return index
 
 
@@ -587,7 +475,7 @@ def run(
         else:
             spawn.append(precision)
     if spawn:
-        parts.update(_spawned(out_dir, cfg, spawn, until, workers or backend.usable_cores(), log))
+        parts.update(spawned(out_dir, cfg, spawn, until, workers or backend.usable_cores(), log))
     summary = dem_analysis.analyse(parts, out_dir / "dem_runs", cfg, log=log)
     summary["wall_s"] = time.perf_counter() - start
     summary["advanced_optimization"] = {
@@ -601,7 +489,7 @@ def run(
     summary["figures"] = [figure.name, stability_figure.name]
     (out_dir / "dem_accuracy.md").write_text(dem_charts.tables(summary))
     path = out_dir / "dem_accuracy.json"
-    path.write_text(json.dumps(summary, indent=1, default=_jsonable) + "\n")
+    path.write_text(json.dumps(summary, indent=1, default=jsonable) + "\n")
     log(f"dem accuracy: wrote {figure}, {stability_figure} and {path} [{summary['wall_s']:.0f} s]")
     return summary
 

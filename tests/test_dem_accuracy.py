@@ -110,6 +110,39 @@ def test_free_collision_beyond_its_measured_limit_stops_with_a_clear_error(
         assert "error" not in err
 
 
+# Layout 93 of the pillar ensemble (Coulomb, mu = 0.5, seed 93; ``dem_ensemble``): with the
+# coupled step at 0.8 stable_dt (nominal, 0.768 actual) its jam goes unstable at 14.5 s,
+# bodies spinning up to 10-11 rad/s (2026-11-27 and again 2026-12-02). From its state at 14 s
+# the coupled step runs on at 0.6 (|omega| <= 3.2 rad/s) and diverges at 0.7 and above; at
+# 0.6 the whole run completes, as all 128 layouts did (docs/accuracy.md, "Over 128 layouts").
+HARD_JAM_SEED = 93
+HARD_JAM_DIVERGES_AT = (14.0, 15.0)  # s
+
+
+@pytest.mark.parametrize(("ratio", "diverges"), [(0.8, True), (0.6, False)])
+def test_the_coupled_step_loses_a_hard_jam_at_0_8_stable_dt_and_holds_it_at_0_6(ratio, diverges):
+    """Where the coupled step fails: a jam harder than the stability study's (which holds to
+    1.42 stable_dt) is lost at 0.8 and kept at 0.6, the whole 20 s."""
+    import re
+
+    from taichi_ice.engine.options import Options
+    from taichi_ice.errors import DivergenceError
+    from taichi_ice.run.simulation import Simulation
+    from taichi_ice.scene.parse import reseeded
+
+    scene = reseeded(dem_scenes.pillar("coulomb"), HARD_JAM_SEED)
+    dt = dem_accuracy.field_step(ratio, scene.stable_dt)
+    sim = Simulation([scene], options=Options(dt=dt, force_dt=True, integrator="coupled"))
+    if diverges:
+        with pytest.raises(DivergenceError, match="created") as exc:
+            sim.run(until=20.0)
+        at = float(re.search(r"at t = (\S+) s", str(exc.value)).group(1))
+        assert HARD_JAM_DIVERGES_AT[0] < at < HARD_JAM_DIVERGES_AT[1], str(exc.value)
+    else:
+        result = sim.run(until=20.0)
+        assert result.status == "complete"
+
+
 def test_quick_study_runs_and_its_collisions_match_the_ode(tmp_path):
     """--quick end to end: its files, and collisions within 1 % of the ODE at 0.1 stable_dt."""
     summary = dem_accuracy.run(tmp_path, quick=True)

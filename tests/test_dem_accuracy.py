@@ -203,12 +203,14 @@ def test_a_failed_worker_stops_the_others_and_names_its_command(tmp_path):
     """``dem_workers.run_workers``: a worker that exits non-zero raises with its exit code
     and command, and the worker still running is stopped, not waited for (it would sleep
     60 s)."""
+    import os
     import sys
     import time
 
     sleeper = [sys.executable, "-c", "import time; time.sleep(60)"]
     failing = [sys.executable, "-c", "import sys; sys.exit(3)"]
-    jobs = [("f64", "euler", tmp_path, sleeper), ("f64", "coupled", tmp_path, failing)]
+    env = dict(os.environ)
+    jobs = [("f64", "euler", sleeper, env), ("f64", "coupled", failing, env)]
     start = time.perf_counter()
     with pytest.raises(RuntimeError, match=r"exit 3\).*sys\.exit\(3\)"):
         dem_workers.run_workers(jobs, 2, lambda _m: None)

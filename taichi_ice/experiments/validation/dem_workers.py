@@ -10,14 +10,14 @@ worker per precision, one after the other (``docs/accuracy.md``).
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .worker import study_worker
 
 
 def jsonable(x):
@@ -32,37 +32,24 @@ def jsonable(x):
 
 
 def command(precision: str, folder: Path, quick: bool, until: float | None, integrator: str):
-    """The command line of a worker: one precision and one integrator into ``folder``."""
-    cmd = [
-        sys.executable,
-        "-m",
-        "taichi_ice.commands.validate",  # the study's command line, a worker per job
-        "dem_accuracy",
-        "--worker",
-        precision,
-        "--out",
-        str(folder),
-        "--integrators",
-        integrator,
-    ] + (["--quick"] if quick else [])
+    """The command line and environment of a worker: one precision and one integrator into
+    ``folder`` (``worker.study_worker``)."""
+    args = ["--out", str(folder), "--integrators", integrator] + (["--quick"] if quick else [])
     if until is not None:
-        cmd += ["--until", str(until)]
-    return cmd
+        args += ["--until", str(until)]
+    return study_worker("dem_accuracy", precision, *args)
 
 
-def run_workers(jobs: list[tuple[str, str, Path, list[str]]], slots: int, log) -> None:
-    """Run the workers' command lines, at most ``slots`` at a time, in the order given
-    (longest first: the last to start are the shortest). ``jobs``: (precision, integrator,
-    folder, command). A worker that fails stops the others (what they wrote stays) and
-    raises, naming its command."""
-    root = str(Path(__file__).resolve().parents[3])  # the folder that holds taichi_ice/
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+def run_workers(jobs: list[tuple[str, str, list[str], dict]], slots: int, log) -> None:
+    """Run the workers, at most ``slots`` at a time, in the order given (longest first: the
+    last to start are the shortest). ``jobs``: (precision, integrator, command line,
+    environment). A worker that fails stops the others (what they wrote stays) and raises,
+    naming its command."""
     waiting, running = list(jobs), []
     try:
         while waiting or running:
             while waiting and len(running) < slots:
-                precision, integrator, _folder, cmd = waiting.pop(0)
+                precision, integrator, cmd, env = waiting.pop(0)
                 log(f"dem accuracy: {precision} {integrator} worker process ...")
                 running.append((subprocess.Popen(cmd, env=env), cmd))
             time.sleep(0.2)
@@ -95,9 +82,7 @@ def spawned(
     ]
     jobs.sort(key=lambda job: job[0] != "f64")
     run_workers(
-        [(p, i, folder, command(p, folder, cfg["quick"], until, i)) for p, i, folder in jobs],
-        slots,
-        log,
+        [(p, i, *command(p, folder, cfg["quick"], until, i)) for p, i, folder in jobs], slots, log
     )
     parts = {}
     for p in precisions:

@@ -39,6 +39,7 @@ import numpy as np
 
 from ...physics.friction import METHODS, RateState, method_code
 from .single_interface import Profile, profiles
+from .worker import study_worker
 
 # Halvings of the step: ramp dt = 1 s ... 2^-10 s; sinusoid dt = P/4 ... P/4096.
 RAMP_DTS = tuple(2.0**-k for k in range(11))
@@ -196,27 +197,16 @@ def _run_worker(
 ) -> dict[str, Any]:
     from ... import backend
 
-    package_root = str(Path(__file__).resolve().parents[3])  # the folder holding taichi_ice/
-    env = dict(os.environ)
-    if optimize is not None:
-        env[backend.OPTIMIZE_ENV] = backend.optimize_level(optimize)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     with tempfile.TemporaryDirectory() as tmp:
         result = Path(tmp) / "result.json"
-        cmd = [
-            sys.executable,
-            "-m",
-            "taichi_ice.commands.validate",  # the study's command line, a worker per precision
+        cmd, env = study_worker(
             "speed_accuracy",
-            "--worker",
             precision,
-            "--arch",
-            arch,
-            "--interfaces",
-            str(n_interfaces),
-            "--result",
-            str(result),
-        ] + (["--quick"] if quick else [])
+            *("--arch", arch, "--interfaces", str(n_interfaces), "--result", str(result)),
+            *(["--quick"] if quick else []),
+        )
+        if optimize is not None:
+            env[backend.OPTIMIZE_ENV] = backend.optimize_level(optimize)
         proc = subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, check=False)
         if proc.returncode != 0:
             raise RuntimeError(f"speed/accuracy worker for {precision} failed: {' '.join(cmd)}")

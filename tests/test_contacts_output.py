@@ -114,6 +114,19 @@ def forces_on_bodies(rows: dict, position: np.ndarray) -> tuple[np.ndarray, np.n
     return force, torque
 
 
+def pose(run: dict, frame: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(position, angle)`` of the bodies at the pose the step from ``frame`` takes its
+    contacts at: the frame's, or with the midstep step each body in free flight for dt / 2
+    from it (the run file's ``integrator`` and ``dt``)."""
+    frames = run["frames"]
+    position, angle = frames["position"][frame], frames["angle"][frame]
+    if run["attrs"]["integrator"] == "midstep":
+        half = 0.5 * float(run["attrs"]["dt"])
+        position = position + half * frames["velocity"][frame]
+        angle = angle + half * frames["omega"][frame]
+    return position, angle
+
+
 def frame_rows(run: dict, frame: int) -> dict:
     """Frame ``frame``'s rows, cut by the ragged array's counts (CF H.2.4)."""
     c = run["contacts"]
@@ -122,14 +135,20 @@ def frame_rows(run: dict, frame: int) -> dict:
     return {name: c[name][rows] for name in ROWS}
 
 
-@pytest.fixture(scope="module", params=["coulomb", "rate-state"])
+# Each law at its default integrator (Coulomb: midstep; rate and state: Euler), and Coulomb
+# with the Euler step.
+RUNS = {"coulomb": ("coulomb", None), "rate-state": ("rate-state", None)}
+RUNS["coulomb-euler"] = ("coulomb", "euler")
+
+
+@pytest.fixture(scope="module", params=list(RUNS))
 def ran(request, tmp_path_factory):
     """A run with contacts, and after it the engine's step from its last frame, split at its
     stages: what the contact kernel gathered on each body, then the probes' impulses and
     the contact slots the whole step left."""
-    law = request.param
-    path = tmp_path_factory.mktemp("contacts") / f"{law}.h5"
-    sim = Simulation(jam(law), contacts=True)
+    law, integrator = RUNS[request.param]
+    path = tmp_path_factory.mktemp("contacts") / f"{request.param}.h5"
+    sim = Simulation(jam(law), contacts=True, integrator=integrator)
     sim.run(out=path)
     world = sim.world
     n = world.batch.n_bodies
@@ -163,7 +182,7 @@ def test_rows_are_the_forces_the_engine_applies_in_the_step_from_the_frame(ran, 
     law, sim, _path, run, engine = ran
     last = len(run["frames"]["time"]) - 1
     rows = frame_rows(run, last)
-    position = run["frames"]["position"][last]
+    position, _ = pose(run, last)
     force, torque = forces_on_bodies(rows, position)
     n_rows = len(rows["body_a"])
     assert n_rows >= 5  # the floor, the wall, the pusher and the squares between them
@@ -207,7 +226,7 @@ def test_probe_force_of_the_step_after_each_frame_is_the_sum_of_its_rows(ran, f6
         after = int(np.argmin(np.abs(series["time"] - (t + sim.dt))))
         assert series["time"][after] == pytest.approx(t + sim.dt, rel=1e-12)
         rows = frame_rows(run, f)
-        force, _ = forces_on_bodies(rows, frames["position"][f])
+        force, _ = forces_on_bodies(rows, pose(run, f)[0])
         np.testing.assert_allclose(
             series["probe_force"][after],
             force[probes],
@@ -271,20 +290,22 @@ def test_in_one_step_every_sliding_row_is_at_the_cap(tmp_path):
 
 def test_geometry_is_the_overlap_of_the_two_floes_at_the_frame(ran, f64):
     """Each row's overlap area and point are shapely's intersection of the two floes placed
-    at the frame (its area and centroid), its width the chord between the outlines'
-    crossings, its normal a unit vector across that chord from body_a toward body_b."""
+    at the frame (its area and centroid; with the midstep step, placed at the pose it
+    predicts for mid-step), its width the chord between the outlines' crossings, its normal
+    a unit vector across that chord from body_a toward body_b."""
     _law, _sim, _path, run, _engine = ran
     b, frames = run["bodies"], run["frames"]
     off = b["vertex_offsets"]
     checked = 0
     for f in range(len(frames["time"])):
         rows = frame_rows(run, f)
-        c, s = np.cos(frames["angle"][f]), np.sin(frames["angle"][f])
+        position, angle = pose(run, f)
+        c, s = np.cos(angle), np.sin(angle)
         floes = []
         for i in range(len(off) - 1):
             v = b["vertices"][off[i] : off[i + 1]]
             turned = np.stack([c[i] * v[:, 0] - s[i] * v[:, 1], s[i] * v[:, 0] + c[i] * v[:, 1]])
-            floes.append(shapely.Polygon(turned.T + frames["position"][f][i]))
+            floes.append(shapely.Polygon(turned.T + position[i]))
         for k in range(len(rows["body_a"])):
             a, bb = floes[rows["body_a"][k]], floes[rows["body_b"][k]]
             both = a.intersection(bb)
@@ -337,9 +358,9 @@ def test_xarray_and_the_netcdf_library_read_the_group(ran):
 def test_a_run_without_contacts_is_the_same_file_without_the_group(ran, tmp_path):
     """The same scene run without ``contacts`` writes no ``/contacts`` and, variable for
     variable, the same file: asking for the rows changes nothing the run computes."""
-    law, _sim, path, _run, _engine = ran
+    law, sim, path, _run, _engine = ran
     plain = tmp_path / "plain.h5"
-    Simulation(jam(law)).run(out=plain)
+    Simulation(jam(law), integrator=sim.options.integrator).run(out=plain)
     with h5py.File(path, "r") as f, h5py.File(plain, "r") as g:
         assert "contacts" in f and "contacts" not in g
         assert set(f) - {"contacts"} == set(g)
@@ -433,9 +454,12 @@ def test_the_snapshots_draw_the_force_chains(ran):
 def test_a_world_of_a_batch_writes_the_rows_it_writes_alone(ran, tmp_path):
     """Batched with another world (pushed faster), a world's file holds the rows of its run
     alone, bit for bit, its bodies numbered within it; the other world has rows of its own."""
-    law, _sim, _path, run, _engine = ran
+    law, sim, _path, run, _engine = ran
     paths = [tmp_path / "a.h5", tmp_path / "b.h5"]
-    Simulation([jam(law), jam(law, push=0.3)], contacts=True).run(out=paths)
+    batch = Simulation(
+        [jam(law), jam(law, push=0.3)], contacts=True, integrator=sim.options.integrator
+    )
+    batch.run(out=paths)
     alone, batched, other = run["contacts"], read_run(paths[0]), read_run(paths[1])
     for name, values in alone.items():
         np.testing.assert_array_equal(batched["contacts"][name], values, err_msg=name)

@@ -7,18 +7,25 @@ tangential force, the friction coefficient, the slip rate, theta and whether the
 sticks. The forces are those the engine applies over that step, ``(t, t + dt]``: summed
 over a body's rows they are the body's net contact force of the step (``body_force_q``),
 over the probes' rows the probe force of the step; theta and the slip rate are what the
-step leaves in the contact's slot (``contact_theta``, ``contact_slip``).
+step leaves in the contact's slot (``contact_theta``, ``contact_slip``). The midstep step
+(Coulomb friction's default integrator) takes each contact at the pose predicted for
+mid-step, every body in free flight for dt / 2 from the frame: there a row's point, normal,
+width and overlap are that pose's (the frame's where the outlines no longer overlap then),
+and the force's torque on a body is about its centroid at that pose, ``position + dt / 2
+velocity``.
 
 How: the rows are computed on the host from the state read back (positions, the bodies'
 rotations ``body_rot``, velocities, each contact slot's memory: partner, stretch, theta,
-slip rate, crushed area, the analytic step's last forces; the last velocity changes) by the
+slip rate, crushed area, the analytic step's last forces; the last velocity changes; for the
+midstep step the angles, which turn each body to its predicted mid-step pose) by the
 contact kernel's NumPy twin, ``reference_contact.contact_force``, which does the kernel's
 float64 operations in the same order (``tests/test_engine.py`` holds whole runs of them
 together): equal to what the kernel applies to round-off in a float64 run, to float32's
 round-off in a float32 run (the twin works in float64). The kernel is not changed and stores
 nothing more, so a run that asks for rows steps bit for bit as one that does not, compiles
 no other kernels, and the geometry of a frame's rows is that of the frame's own positions
-(the first frame, t = 0, has its rows too). The price is host time: about 0.2 ms of Python
+(the midstep step's: of the pose it predicts from them; the first frame, t = 0, has its rows
+too). The price is host time: about 0.2 ms of Python
 per contact per frame (a pillar scene's 100 contacts, 20 ms a frame); a field of 1e4 floes
 spends seconds a frame on it. (Storing the rows in the kernel, fields compiled in on
 demand, is the way for large fields on a GPU: not done.)
@@ -36,11 +43,14 @@ NumPy only (it reads the World's fields with ``to_numpy``; no kernel is compiled
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from ..codes import BodyKind
+from ..physics.polygon import overlap
 from ..physics.slip import NO_INTERFACE_ABOVE
-from .reference import ReferenceModel
+from .reference import ReferenceModel, outline
 from .reference_contact import ContactMemory, contact_force
 
 __all__ = ["ROW_NAMES", "candidate_pairs", "contact_rows", "empty_rows"]
@@ -173,6 +183,8 @@ def _read(world) -> dict:
         names["crushed"] = ("contact_crushed", True)
     if layout.analytic:
         names["force"] = ("contact_force", True)
+    if layout.midstep:  # the step's mid-step configuration turns each body by its angle
+        names["angle"] = ("body_angle", True)
     if layout.velocity_changes:
         names["dvel"], names["domega"] = ("body_dvel", True), ("body_domega", True)
     # One launch for all of them (``World.read``), not a to_numpy kernel per field.
@@ -233,6 +245,14 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
         (int(o), int(state["partner"][o, s])): int(s)
         for o, s in zip(*np.nonzero(np.arange(state["partner"].shape[1]) < state["count"][:, None]))
     }
+    # The midstep step linearises each contact about the configuration predicted for
+    # mid-step (every body in free flight for dt / 2), as ``reference.reference_step`` does.
+    mid = None
+    if model.midstep:
+        half = 0.5 * float(world.dt)
+        mid = SimpleNamespace(
+            pos=pos + half * state["vel"], angle=state["angle"] + half * state["omega"]
+        )
     out = []
     for sl in world.batch.world_slices():
         i, j = candidate_pairs(pos[sl], radius[sl])
@@ -252,6 +272,14 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
             memory = None if slot is None else _memory(state, o, slot)
             origin = pos[o]
             shift = pos[p] - origin
+            at_mid = None
+            if mid is not None:
+                at_mid = (
+                    outline(model, mid, o, origin),
+                    outline(model, mid, p, origin),
+                    mid.pos[o] - origin,
+                    mid.pos[p] - origin,
+                )
             c = contact_force(
                 turned[o, : count[o]],
                 shift + turned[p, : count[p]],
@@ -265,11 +293,17 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
                 dvel=(state["dvel"][o], state["dvel"][p]),
                 domega=(float(state["domega"][o]), float(state["domega"][p])),
                 memory=memory,
+                mid=at_mid,
                 **model.pair(o, p),
             )
             if c is None:
                 continue
-            rows.append((o, p, origin, c, memory))
+            # The overlap of the pose the step takes the contact at (``c``'s point, normal
+            # and width are the mid-step's where the outlines overlap there).
+            area = c.area
+            if at_mid is not None:
+                area = overlap(at_mid[0], at_mid[1]).area or area
+            rows.append((o, p, origin, c, memory, area))
         out.append(_tabulate(rows, sl.start, layout.rate_state, model, world.dt))
     return out
 
@@ -277,11 +311,11 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
 def _tabulate(rows, start: int, rate_state: bool, model: ReferenceModel, dt: float) -> dict:
     """The rows of one world as arrays (``ROW_NAMES``)."""
     table = empty_rows(len(rows))
-    for k, (o, p, origin, c, memory) in enumerate(rows):
+    for k, (o, p, origin, c, memory, area) in enumerate(rows):
         table["body_a"][k], table["body_b"][k] = o - start, p - start
         table["point"][k] = origin + c.point
         table["normal"][k] = c.normal
-        table["width"][k], table["overlap"][k] = c.width, c.area
+        table["width"][k], table["overlap"][k] = c.width, area
         table["force_normal"][k], table["force_tangential"][k] = c.normal_force, c.tangential_force
         table["mu"][k] = c.mu
         table["stuck"][k] = 0 if c.sliding else 1

@@ -30,7 +30,11 @@ Where a sliding rate-and-state contact takes its step in sub-steps (``[ice]
 slide_resolution``), its force and ``mu`` are the step's means over them, and ``slip_rate``,
 ``theta`` and ``stuck`` the state its last sub-step leaves: a sliding row is at the cap
 ``|F_t| = mu F_n`` if it slid through the whole step, below it where its slide started
-within the step.
+within the step. With the midstep step (the run's ``integrator`` attribute; Coulomb
+friction's default) a contact is taken at the pose predicted for mid-step, every body in free
+flight for dt / 2 from the frame: ``point``, ``normal``, ``width`` and ``overlap`` are that
+pose's (the frame's where the outlines no longer overlap then), and a row's torque on a body
+is about the body's centroid there, ``position + dt / 2 velocity``.
 
 Written with the frames, in the same open of the file (``RunWriter``): a reader sees as many
 frames in ``/contacts`` as in ``/frames``.

@@ -241,6 +241,30 @@ def test_a_damaged_checkpoint_resumes_or_is_refused_and_the_run_file_stays_whole
     assert after["attrs"]["status"] == before["attrs"]["status"]
 
 
+def test_a_checkpoint_whose_field_name_is_not_text_is_refused_as_damaged(
+    finished, tmp_path, capsys, taichi_runtime
+):
+    """A damaged byte in a field's name can leave a name that is not UTF-8 (h5py then gives
+    bytes, which do not sort with the other names): the resume is refused as damaged, in
+    one line, not a traceback (found by the fuzz test above on 2026-12-02)."""
+    import h5py
+
+    arch, precision = taichi_runtime
+    run = tmp_path / "run.h5"
+    shutil.copyfile(finished["run"], run)
+    shutil.copyfile(finished["ckpt"], ckpt.path_for(run))
+    with h5py.File(ckpt.path_for(run), "r+") as f:
+        f["data"].move("body_angle", b"body_angl\xe9")
+        assert b"body_angl\xe9" in list(f["data"])  # h5py gives the name as bytes
+    before = read_run(run)
+    argv = ["run", str(TWO_SQUARES), "--out", str(run), "--resume", "--until", "0.05"]
+    code = main([*argv, "--quiet", "--arch", arch, "--precision", precision])
+    err = capsys.readouterr().err
+    assert refused(code, err) and "a damaged checkpoint" in err
+    after = read_run(run)  # the file as it was
+    np.testing.assert_array_equal(after["series"]["time"], before["series"]["time"])
+
+
 @settings(FUZZ, max_examples=25)
 @given(how=DAMAGE)
 def test_a_damaged_ledger_resumes_or_is_refused_and_the_runs_stay_whole(

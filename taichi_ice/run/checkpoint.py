@@ -207,17 +207,24 @@ def digest(groups: dict, attrs: dict) -> str:
     and bytes) and attributes (but ``written`` and ``digest``), in a fixed order."""
     h = hashlib.sha256()
     for group in sorted(groups):
-        for name in sorted(groups[group]):
+        # A damaged name may not be UTF-8 (h5py gives it as bytes): it stays in the digest.
+        for name in sorted(groups[group], key=_text):
             a = np.ascontiguousarray(groups[group][name])
-            h.update(f"{group}/{name}:{a.dtype.str}:{a.shape}".encode())
+            h.update(f"{group}/{_text(name)}:{a.dtype.str}:{a.shape}".encode(*_SURROGATES))
             h.update(a.tobytes())
-    for key in sorted(attrs):
+    for key in sorted(attrs, key=_text):
         if key not in ("written", "digest"):
-            value = attrs[key]
-            text = value.decode("utf-8", "surrogateescape") if isinstance(value, bytes) else value
             # A damaged attribute may hold bytes that are not UTF-8: they stay in the digest.
-            h.update(f"{key}={text}".encode("utf-8", "surrogateescape"))
+            h.update(f"{_text(key)}={_text(attrs[key])}".encode(*_SURROGATES))
     return h.hexdigest()
+
+
+_SURROGATES = ("utf-8", "surrogateescape")
+
+
+def _text(value):
+    """``value``, or the text of bytes (kept whole: undecodable bytes as surrogates)."""
+    return value.decode(*_SURROGATES) if isinstance(value, bytes) else value
 
 
 def read(path: str | Path) -> dict:
@@ -283,7 +290,15 @@ def restore(sim, ckpt: dict, where: str | Path) -> None:
         )
     ident = identity(sim)
     # The law first: a scene's text holds its [friction] table, so another law (--friction)
-    # would otherwise be reported as another scene.
+    # would otherwise be reported as another scene. The integrator next: a scene's dt =
+    # "auto" follows it (Coulomb's default changed from euler to midstep on 2026-12-02).
+    if a["frictions"] == ident["frictions"] and a["integrator"] != ident["integrator"]:
+        raise RunFileError(
+            f"{where}: the checkpoint is of another run (its integrator differs from this "
+            f"one's: it stepped with {a['integrator']}, this run with {ident['integrator']}); "
+            f'resume with --integrator {a["integrator"]} (integrator="{a["integrator"]}"), '
+            "or start anew with --overwrite"
+        )
     for key, now, then in (
         ("friction law", ident["frictions"], a["frictions"]),
         ("scene", ident["scenarios"], a["scenarios"]),

@@ -177,12 +177,13 @@ def roundoff_spread(pair, p, q, memory, rng) -> tuple[float, float]:
     ids=["coulomb", "rate-state", "rate-state-sub-steps"],
 )
 def test_contact_twin_matches_kernel_on_random_pairs(f64, law, ice):
-    """Force, torque, memory and dissipation of one contact match the NumPy twin, twice:
-    the damped stick spring, the slip rate and theta, and the work booked at the
-    mid-step velocity; with ``[ice] slide_resolution``, the slide in sub-steps."""
+    """Force, torque, memory and dissipation of one contact of the Euler step match the
+    NumPy twin, twice: the damped stick spring, the slip rate and theta, and the work booked
+    at the mid-step velocity; with ``[ice] slide_resolution``, the slide in sub-steps. (The
+    analytic steps' contacts, Coulomb's default among them: test_contact_coupled.py.)"""
     rng = np.random.default_rng(SEED)
     scenes, pos, ang = pair_scenes(rng, law, ice)
-    world = World(scenes)
+    world = World(scenes, integrator="euler")
     model = ReferenceModel.from_scenes(scenes)
     d = world.data
     vel, omega = world.velocities(), world.omegas()

@@ -72,13 +72,18 @@ def test_collision_ode_matches_the_closed_form_of_a_face_on_collision():
 
 def _collision_file(tmp_path, ratio: float):
     """The free collision of the stability study as a scene file whose sampling makes
-    ``dt = ratio x stable_dt`` exact; returns (path, dt)."""
+    ``dt = ratio x stable_dt`` exact, stepped by the Euler step, whose limit the study
+    measured (``FREE_COLLISION_*``; the midstep step, Coulomb's default, survives 14 x);
+    returns (path, dt)."""
     scene = dem_scenes.collision(dem_scenes.OFFSET, "coulomb")
     dt = ratio * scene.stable_dt
     every = round(dem_scenes.COLLISION_END / dt)
     raw = copy.deepcopy(dict(scene.raw))
     raw["simulation"].update(
-        duration=every * dt, output_interval=every * dt, series_interval=every * dt
+        duration=every * dt,
+        output_interval=every * dt,
+        series_interval=every * dt,
+        integrator="euler",
     )
     path = tmp_path / f"collision_{ratio:g}.toml"
     path.write_text(dump_toml(raw))
@@ -298,6 +303,99 @@ def test_the_analysis_keeps_each_integrator_its_own_series_order_and_default_ste
     assert "| face-on collision: restitution | coulomb | analytic | f64 |" in text
     assert "coulomb, analytic" in text  # the orders' column
     assert "| 2.00 (0.00) |" in text
+
+
+def test_a_law_alone_gets_the_step_its_own_errors_allow():
+    """The recommendation on one law's errors alone (``recommendation_by_law``, what a
+    default step per law rests on): face-on restitution 0.05 (h / 0.4)^2 with Coulomb and
+    four times that with rate and state, against the 0.02 bound of ``ACCURACY``: Coulomb
+    alone allows h <= 0.253 (the candidate 0.25), rate and state h <= 0.126 (0.1), the
+    largest over both laws as rate and state; a jam's limit of 0.45 caps every one at 0.2
+    (2 x below it). The tables say each, and why the next candidate was refused."""
+    from taichi_ice.experiments.validation import dem_analysis, dem_charts
+
+    points = [
+        {
+            "scene": "face-on collision",
+            "measure": "restitution",
+            "law": law,
+            "integrator": "analytic",
+            "precision": "f64",
+            "ratio": h,
+            "error": scale * 0.05 * (h / 0.4) ** 2,
+        }
+        for law, scale in (("coulomb", 1.0), ("rate-state", 4.0))
+        for h in (0.0125, 0.05, 0.2, 0.8)
+    ]
+    wide = {"jam": {"largest_surviving_ratio": 2.0}}
+    picked = {
+        law: dem_analysis._recommend(points, wide, "analytic", law)["dt_safety"]
+        for law in ("coulomb", "rate-state", None)
+    }
+    assert picked == {"coulomb": 0.25, "rate-state": 0.1, None: 0.1}
+    tight = {"jam": {"largest_surviving_ratio": 0.45}}
+    coulomb = dem_analysis._recommend(points, tight, "analytic", "coulomb")
+    assert coulomb["dt_safety"] == 0.2 and coulomb["jam_margin"] == pytest.approx(2.25)
+    assert "margin 1.80 < 2" in coulomb["refused"]["0.25"]
+    summary = {
+        "points": points,
+        "orders": {},
+        "timing": {},
+        "settings": {
+            "laws": ["coulomb", "rate-state"],
+            "integrators": ["analytic"],
+            "stable_dt": {"collisions": 1e-4, "pillar, pushed box": 1e-4},
+        },
+        "pillar_parting_at_a_quarter_step": [],
+        "chaos": {},
+        "recommendation": {"analytic": dem_analysis._recommend(points, wide, "analytic")},
+        "recommendation_by_law": {
+            "analytic": {
+                law: dem_analysis._recommend(points, wide, "analytic", law)
+                for law in ("coulomb", "rate-state")
+            }
+        },
+    }
+    text = dem_charts.tables(summary)
+    assert (
+        "- on coulomb's errors alone: **0.25**, margin in the jam 8.00 (the next refused: " in text
+    )
+    assert "face-on collision: restitution 0.0281 > 0.02" in text
+    assert "- on rate-state's errors alone: **0.1**" in text
+
+
+def test_coulombs_default_step_is_the_one_the_committed_records_chose():
+    """Coulomb friction's default (the midstep step at ``MIDSTEP_SAFETY``) is what the
+    committed study recommends on Coulomb's errors alone, and the committed 256-layout
+    ensemble ran it: every layout through its 20 s, no measure moved beyond the sampling
+    error against the Euler step at a quarter of its old default. A default changed without
+    records that back it fails here."""
+    import re
+    from pathlib import Path
+
+    from taichi_ice.physics import timestep
+
+    assert timestep.default_integrator("coulomb") == "midstep"
+    assert timestep.default_integrator("rate-state") == "euler"
+    validation = Path(__file__).resolve().parents[1] / "docs" / "validation"
+    text = (validation / "dem_accuracy.md").read_text()
+    section = text.split("Recommended `dt_safety` with the midstep integrator")[1]
+    chosen = re.search(r"on coulomb's errors alone: \*\*([0-9.]+)\*\*", section)
+    assert float(chosen.group(1)) == timestep.MIDSTEP_SAFETY
+    record = json.loads((validation / "dem_ensemble_256_coulomb.json").read_text())
+    (run,) = [
+        r
+        for r in record["runs"]
+        if (r["integrator"], r["nominal"]) == ("midstep", timestep.MIDSTEP_SAFETY)
+    ]
+    assert run["status"] == "complete" and len(run["seeds"]) == 256
+    against = record["comparisons"][
+        f"coulomb: midstep {timestep.MIDSTEP_SAFETY:g} against euler 0.05"
+    ]
+    for measure in ("peak_force", "friction_energy", "concentration"):
+        assert against[measure]["n"] == 256 and against[measure]["within_sampling_error"]
+        assert not against[measure]["differs"]
+    assert not against["released"]["differs"]
 
 
 def test_validate_refuses_an_unknown_integrator_in_one_line(capsys):

@@ -27,6 +27,7 @@ from taichi_ice.errors import StabilityError, UsageError
         ({"arch": "tpu"}, "arch = 'tpu'"),
         ({"energy": "yes"}, "energy must be True or False"),
         ({"timestep": 1e-4}, "unknown engine option(s) timestep"),
+        ({"integrator": "verlet"}, "integrator must be one of"),
     ],
 )
 def test_a_bad_option_is_refused_when_made_naming_it(change, words):
@@ -45,6 +46,37 @@ def test_the_time_step_is_decided_once_against_the_stability_limit():
     with pytest.raises(StabilityError, match=f"dt = {above:g} s is above the stability limit"):
         Options(dt=above).time_step([scene])
     assert Options(dt=above, force_dt=True).time_step([scene]) == (above, scene.stable_dt)
+
+
+def test_the_integrator_is_the_options_else_the_files_else_the_laws():
+    """Options.for_scenes decides a batch's integrator: the option's when given (every
+    scene's dt = "auto" then follows it), else the one the scenes' files name, else the
+    midstep step when every world has Coulomb friction and the Euler step when one has a law
+    with a memory; files that name two are refused, naming both and the fix."""
+    from taichi_ice.physics.friction import RateState
+
+    coulomb = load_scenario("two_squares")
+    assert coulomb.friction.name == "coulomb"
+    memory = coulomb.with_friction(RateState())
+    limit = coulomb.stable_dt
+
+    def decided(scenes, **given):
+        options, stepped = Options(**given).for_scenes(scenes)
+        return options.integrator, [round(s.dt / limit, 12) for s in stepped]
+
+    assert decided([coulomb]) == ("midstep", [0.6])
+    assert decided([memory]) == ("euler", [0.05])
+    assert decided([coulomb, memory]) == ("euler", [0.2, 0.05])
+    assert decided([coulomb], integrator="coupled") == ("coupled", [0.2])
+    assert decided([memory, coulomb], integrator="midstep") == ("midstep", [0.05, 0.6])
+    euler = coulomb.with_integrator("euler")  # as a file with [simulation] integrator
+    assert euler.simulation.integrator == "euler"
+    assert decided([euler, coulomb]) == ("euler", [0.2, 0.2])
+    assert decided([euler], integrator="midstep") == ("midstep", [0.6])
+    assert Options(dt=1e-4).for_scenes([coulomb])[0].dt == 1e-4  # a given dt stays
+    with pytest.raises(UsageError, match=r"different integrators \(coupled, euler") as info:
+        Options().for_scenes([euler, coulomb.with_integrator("coupled")])
+    assert "--integrator" in str(info.value)
 
 
 def _fields(world) -> dict:

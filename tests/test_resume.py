@@ -126,8 +126,11 @@ def test_resume_refuses_another_scene_an_old_format_and_a_missing_checkpoint(tmp
     with pytest.raises(RunFileError, match="its scene differs"):
         Simulation(resolved).run(until=UNTIL, out=path, resume=True)
     # Another integrator steps another state (the analytic step's position impulses).
-    with pytest.raises(RunFileError, match="its integrator differs"):
+    # The message names the checkpoint's integrator and how to resume with it.
+    made_with = Simulation(scene).options.integrator
+    with pytest.raises(RunFileError, match="its integrator differs") as info:
         Simulation(scene, integrator="analytic").run(until=UNTIL, out=path, resume=True)
+    assert f"--integrator {made_with}" in str(info.value)
     # A checkpoint of another state layout (format 1 had two contact buffers) is refused.
     with h5py.File(ckpt.path_for(path), "r+") as f:
         f.attrs["format_version"] = "1"
@@ -178,8 +181,16 @@ def test_ensembles_and_sweeps_tell_a_changed_default_from_the_same_scene():
         k: _identity(SimpleNamespace(scene=coulomb, until=1.0, window=None, laws=v), "cpu", "f64")
         for k, v in laws.items()
     }
-    assert both["coulomb"]["dt_safety"] == {Coulomb(mu=0.5).label: 0.2}
-    assert both["both"]["dt_safety"] == {Coulomb(mu=0.5).label: 0.2, RateState().label: 0.05}
+    assert both["coulomb"]["dt_safety"] == {Coulomb(mu=0.5).label: 0.6}
+    assert both["both"]["dt_safety"] == {Coulomb(mu=0.5).label: 0.6, RateState().label: 0.05}
+    # And Coulomb's, 0.2 with the Euler step until 2026-12-02, 0.6 with the midstep step
+    # since (its default integrator): another scene to each.
+    euler = dataclasses.replace(
+        coulomb, simulation=dataclasses.replace(coulomb.simulation, dt_safety=0.2)
+    )
+    assert euler.text == coulomb.text and (euler.dt_safety, coulomb.dt_safety) == (0.2, 0.6)
+    assert scene_digest(euler) != scene_digest(coulomb)
+    assert sweep_of(euler) != sweep_of(coulomb)
 
 
 # --------------------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ from taichi_ice.codes import BodyKind
 from taichi_ice.errors import ScenarioError
 from taichi_ice.physics import polygon
 from taichi_ice.physics.friction import Coulomb, RateState
-from taichi_ice.physics.timestep import DEFAULT_SAFETY, RATE_STATE_SAFETY
+from taichi_ice.physics.timestep import DEFAULT_SAFETY, MIDSTEP_SAFETY, RATE_STATE_SAFETY
 from taichi_ice.scene import parse as sc
 from taichi_ice.scene import tables
 
@@ -212,6 +212,12 @@ BAD = [
         "duration = 2.0",
         "duration = 2.0\ndt_safety = 1.5",
         ["[simulation]", "key 'dt_safety'", "(0, 1]"],
+    ),
+    (
+        "integrator",
+        "duration = 2.0",
+        'duration = 2.0\nintegrator = "verlet"',
+        ["[simulation]", "key 'integrator'", '"verlet"', '"auto" | "euler"', '"midstep"'],
     ),
     (
         "force-on-fixed",
@@ -418,7 +424,7 @@ def test_auto_dt_and_limit_follow_dynamic_bodies() -> None:
     """dt = "auto" is dt_safety x the limit; the limit depends on the dynamic bodies only."""
     scene = sc.parse_scenario(BASE)
     assert math.isfinite(scene.stable_dt)
-    assert scene.dt == pytest.approx(DEFAULT_SAFETY * scene.stable_dt, rel=1e-15)
+    assert scene.dt == pytest.approx(MIDSTEP_SAFETY * scene.stable_dt, rel=1e-15)
     # A much smaller fixed body changes nothing; the same as a dynamic body lowers the limit.
     tiny = (
         '\n[[body]]\nname = "chip"\nkind = "{kind}"\nshape = "rectangle"\n'
@@ -431,26 +437,41 @@ def test_auto_dt_and_limit_follow_dynamic_bodies() -> None:
 
 
 def test_auto_dt_follows_the_law_unless_the_file_sets_dt_safety() -> None:
-    """dt = "auto" takes 0.2 of the limit with Coulomb friction and 0.05 with a law that has
-    a memory (its pillar statistics are not converged at 0.2 or 0.1: docs/accuracy.md); a
-    file's dt_safety wins for either."""
+    """dt = "auto" takes 0.6 of the limit with Coulomb friction, stepped by its default
+    integrator (midstep), 0.2 with Coulomb and the other integrators, and 0.05 with a law
+    that has a memory, whatever its integrator (its pillar statistics are not converged at
+    0.2 or 0.1: docs/accuracy.md); a file's dt_safety wins for either."""
     from taichi_ice.physics.friction import Coulomb, MemoryOnly, RateState, SteadyState
 
     scene = sc.parse_scenario(BASE)
     limit = scene.stable_dt
-    assert (DEFAULT_SAFETY, RATE_STATE_SAFETY) == (0.2, 0.05)
-    for law, safety in (
-        (Coulomb(mu=0.5), DEFAULT_SAFETY),
-        (RateState(), RATE_STATE_SAFETY),
-        (SteadyState(), RATE_STATE_SAFETY),
-        (MemoryOnly(), RATE_STATE_SAFETY),
+    assert (MIDSTEP_SAFETY, DEFAULT_SAFETY, RATE_STATE_SAFETY) == (0.6, 0.2, 0.05)
+    for law, integrator, safety in (
+        (Coulomb(mu=0.5), "midstep", MIDSTEP_SAFETY),
+        (RateState(), "euler", RATE_STATE_SAFETY),
+        (SteadyState(), "euler", RATE_STATE_SAFETY),
+        (MemoryOnly(), "euler", RATE_STATE_SAFETY),
     ):
         other = scene.with_friction(law)
-        assert other.dt_safety == safety
+        assert (other.integrator, other.dt_safety) == (integrator, safety)
         assert other.dt == pytest.approx(safety * limit, rel=1e-15)
+    # Another integrator, given to the scene (the engine's option does this), moves the step
+    # with it where the law's step depends on it: Coulomb's.
+    for integrator in ("euler", "analytic", "coupled"):
+        assert scene.with_integrator(integrator).dt == pytest.approx(0.2 * limit, rel=1e-15)
+        rs = scene.with_friction(RateState()).with_integrator(integrator)
+        assert rs.dt == pytest.approx(0.05 * limit, rel=1e-15)
+    assert scene.with_integrator("euler").with_integrator("midstep").dt == scene.dt
     own = sc.parse_scenario(BASE.replace("duration = 2.0", "duration = 2.0\ndt_safety = 0.3"))
     for law in (Coulomb(mu=0.5), RateState()):
         assert own.with_friction(law).dt == pytest.approx(0.3 * limit, rel=1e-15)
+        assert own.with_friction(law).with_integrator("euler").dt == own.with_friction(law).dt
+    # A file that names its integrator steps with it, and "auto" is the law's.
+    for named, integrator, safety in (('"euler"', "euler", 0.2), ('"auto"', "midstep", 0.6)):
+        filed = sc.parse_scenario(
+            BASE.replace("duration = 2.0", f"duration = 2.0\nintegrator = {named}")
+        )
+        assert (filed.integrator, filed.dt) == (integrator, pytest.approx(safety * limit))
     # The message for a dt above the limit names the step "auto" would take with the law.
     rs = BASE.replace("duration = 2.0", f"duration = 2.0\ndt = {2 * limit!r}")
     rs += '\n[friction]\nlaw = "rate-state"\n'
@@ -473,8 +494,8 @@ def test_defaults() -> None:
         0.1,
         0.01,
     )
-    assert (sim.seed, sim.dt_safety, sim.force_dt) == (0, None, False)
-    assert scene.dt_safety == DEFAULT_SAFETY  # the law's: Coulomb
+    assert (sim.seed, sim.dt_safety, sim.force_dt, sim.integrator) == (0, None, False, None)
+    assert (scene.integrator, scene.dt_safety) == ("midstep", MIDSTEP_SAFETY)  # Coulomb's
     assert scene.ice == sc.IceProperties(920.0, 0.3, 9.75e7, 3.16e4, 0.5)
     assert scene.water is None
     assert scene.friction == Coulomb(mu=0.5)

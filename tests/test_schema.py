@@ -17,6 +17,7 @@ import taichi as ti
 
 from taichi_ice.engine import schema, stages
 from taichi_ice.engine.assemble import assemble
+from taichi_ice.engine.options import Options
 from taichi_ice.engine.state import ti_dtype
 from taichi_ice.engine.world import STAGES, World
 from taichi_ice.scene.parse import load_scenario
@@ -116,11 +117,13 @@ def test_docs_state_table_is_generated_from_the_schema():
 
 
 def test_traffic_model_counts_the_integrator_by_hand():
-    """integrator.advance moves, per body and f64: reads 10 scalars, 4 vectors, the i64 force
-    and torque, 6 energy terms and what the lists' staleness needs; writes back the same
-    minus the model, plus the body's velocity change, rotation and path, the status and the
-    stale flags."""
-    batch = assemble([load_scenario(ROOT / "scenarios" / "two_squares.toml")])
+    """The Euler step's integrator.advance moves, per body and f64: reads 10 scalars, 4
+    vectors, the i64 force and torque, 6 energy terms and what the lists' staleness needs;
+    writes back the same minus the model, plus the body's velocity change, rotation and
+    path, the status and the stale flags."""
+    batch = assemble(
+        [load_scenario(ROOT / "scenarios" / "two_squares.toml")], Options(integrator="euler")
+    )
     layout = batch.layout.replace(
         n_bodies=1000, n_worlds=1, n_probes=0, water=False, force_ext=True
     )

@@ -87,9 +87,10 @@ def add_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--integrator",
-        default="euler",
+        default=None,
         choices=list(INTEGRATORS),
-        help="the DEM's integrator (run --integrator; default euler)",
+        help="the DEM's integrator (run --integrator; default the law's: midstep with "
+        "Coulomb friction, euler with a law with a memory)",
     )
     p.add_argument(
         "--dt-safety",
@@ -97,8 +98,8 @@ def add_options(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="FRACTION",
         help="the DEM's step as a fraction of the contact stability limit, in (0, 1] "
-        "(default the scene's, 0.2; --integrator coupled holds collisions at 0.8 and jams "
-        "at 0.6, docs/accuracy.md)",
+        "(default the scene's: 0.6 with Coulomb friction and the midstep step, 0.2 with "
+        "Coulomb and the others, 0.05 with a law with a memory; docs/accuracy.md)",
     )
     p.add_argument(
         "--steps",

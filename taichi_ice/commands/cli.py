@@ -345,14 +345,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--integrator",
-        default="euler",
+        default=None,
         choices=list(INTEGRATORS),
-        help="euler: contact forces of the step's start (first order, the default); "
-        "analytic: each contact's spring-dashpot solved over the step (second order); "
-        "coupled: the analytic step with each contact's normal and tangent solved together "
-        "(collisions within 0.2 %% at four times the default step); "
-        "midstep: the coupled step with each contact linearised at mid-step (second order "
-        "where a collision is smooth; docs/accuracy.md)",
+        help="how a step moves the bodies (default the scene's [simulation] integrator, else "
+        "the law's: midstep with Coulomb friction, at 0.6 of the stability limit; euler with a "
+        "law with a memory, at 0.05; docs/accuracy.md, 'So the default step'). euler: contact "
+        "forces of the step's start (first order; Coulomb at 0.2 of the limit); analytic: each "
+        "contact's spring-dashpot solved over the step; coupled: the analytic step with each "
+        "contact's normal and tangent solved together; midstep: the coupled step with each "
+        "contact linearised at mid-step (second order where a collision is smooth). With "
+        'dt = "auto" the step follows the integrator given here',
     )
     p.add_argument(
         "--contacts",

@@ -174,9 +174,10 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
             here: ``dt`` and ``force_dt`` (``Options.time_step``), ``precision`` (None:
             'f64'), ``slots`` (None: ``DEFAULT_SMALL_SLOTS`` plus the most large bodies of
             any world, at most ``LARGE_SLOTS``; plus ``LARGE_SLOTS`` for scenes of up to
-            ``BODY_FLOOR`` bodies) and ``energy`` (``Layout.energy``; off, the
+            ``BODY_FLOOR`` bodies), ``energy`` (``Layout.energy``; off, the
             step neither computes nor stores its terms: fields of ~270 B a block fewer at
-            f64).
+            f64) and ``integrator`` (None: the scenes', ``Options.for_scenes``; the
+            batch's scenes are those that step with it).
 
     Raises:
         ValueError: no scenes, or worlds that disagree on what a batch shares (the message
@@ -188,6 +189,7 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     scenes = tuple(scenes)
     if not scenes:
         raise ValueError("a batch needs at least one scene")
+    options, scenes = options.for_scenes(scenes)
     _check_shared(scenes)
     dt, stable_dt = options.time_step(scenes)
 

@@ -24,17 +24,9 @@ import numpy as np
 
 from ..backend import ARCHES, PRECISIONS
 from ..errors import StabilityError, UsageError
+from ..physics.timestep import INTEGRATORS, default_integrator
 
 STEPPINGS = ("auto", "worlds", "bodies")
-# How a step moves the bodies (``Options.integrator``): "euler", semi-implicit Euler with the
-# contact forces of the step's start (first order); "analytic", each contact's spring-dashpot
-# integrated exactly over the step (``physics.contact_step``; second order); "coupled", the
-# analytic step with each contact's normal and tangent solved together over the step
-# (``physics.contact_coupled``: the bodies' turning couples them); "midstep", the coupled
-# step with each contact linearised about the configuration predicted for mid-step (its
-# normal, point and lever arms: held at the step's start they are a first-order error of the
-# bodies' turn; ``reference_contact.contact_force``'s ``mid``).
-INTEGRATORS = ("euler", "analytic", "coupled", "midstep")
 # Contact slots per body: DEFAULT_SMALL_SLOTS, plus one for each large body of its world (a
 # wall, a pusher) up to LARGE_SLOTS. A body owns its contacts with small bodies of higher id
 # and with large bodies. Measured with 6 slots, checked at every step (the overflow status):
@@ -74,7 +66,10 @@ class Options:
         energy: keep the energy budget; off, trajectories are the same bit for bit and the
             step neither computes nor stores its terms (``schema.Layout.energy``).
         integrator: "euler", "analytic", "coupled" or "midstep" (``INTEGRATORS``): compiled in
-            (``schema.Layout.integrator``).
+            (``schema.Layout.integrator``); None: the scenes' (``for_scenes``: the one their
+            files name, else the law's, "midstep" for Coulomb friction and "euler" for a
+            law with a memory). Given, it wins over the scenes', and their ``dt = "auto"``
+            follows it (``Scene.with_integrator``).
     """
 
     arch: str | None = None
@@ -84,7 +79,7 @@ class Options:
     slots: int | None = None
     stepping: str = "auto"
     energy: bool = True
-    integrator: str = "euler"
+    integrator: str | None = None
 
     def __post_init__(self):
         if self.arch is not None and self.arch not in ARCHES:
@@ -112,8 +107,11 @@ class Options:
             object.__setattr__(self, "slots", int(self.slots))
         if self.stepping not in STEPPINGS:
             raise UsageError(f"stepping must be one of {STEPPINGS}, got {self.stepping!r}")
-        if self.integrator not in INTEGRATORS:
-            raise UsageError(f"integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
+        if self.integrator is not None and self.integrator not in INTEGRATORS:
+            raise UsageError(
+                f"integrator must be one of {INTEGRATORS} (or None: the scenes'), got "
+                f"{self.integrator!r}"
+            )
         for name in ("force_dt", "energy"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise UsageError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -136,6 +134,35 @@ class Options:
 
         arch, precision = resolve(self.arch, self.precision)
         return dataclasses.replace(self, arch=arch, precision=precision)
+
+    def for_scenes(self, scenes: Sequence) -> tuple[Options, tuple]:
+        """This Options with ``integrator`` decided for ``scenes``, and the scenes as they step
+        with it (``Scene.with_integrator``: their ``dt = "auto"`` the fraction of the limit
+        their law takes with it). Unless given here, the integrator is the one the scenes'
+        files name (``[simulation] integrator``), else that of the batch's laws
+        (``timestep.default_integrator``: "midstep" when every world has Coulomb friction,
+        "euler" when one has a law with a memory, whose kernels the batch then runs).
+
+        Raises:
+            UsageError: scenes whose files name different integrators, none given here.
+        """
+        scenes = tuple(scenes)
+        integrator = self.integrator
+        if integrator is None:
+            named = {s.simulation.integrator for s in scenes} - {None}
+            if len(named) > 1:
+                names = ", ".join(sorted(named))
+                raise UsageError(
+                    f"the scenes of one batch name different integrators ({names}, "
+                    "[simulation] integrator): a batch steps with one; give them the same, or "
+                    "choose one for all (integrator=..., --integrator)"
+                )
+            coulomb = all(s.friction.name == "coulomb" for s in scenes)
+            integrator = (
+                named.pop() if named else default_integrator("coulomb" if coulomb else "rate-state")
+            )
+        chosen = self if integrator == self.integrator else self.replace(integrator=integrator)
+        return chosen, tuple(s.with_integrator(integrator) for s in scenes)
 
     def time_step(self, scenes: Sequence) -> tuple[float, float]:
         """``(dt, stable_dt)`` for ``scenes``: this dt or the smallest ``scene.dt``, and the

@@ -114,7 +114,7 @@ class WorldPool:
         from ..errors import UsageError
         from .world import World
 
-        options = (Options() if options is None else options).resolved()
+        options, scenes = (Options() if options is None else options).resolved().for_scenes(scenes)
         scenes = list(scenes)
         n_bodies = sum(len(s.bodies) for s in scenes)
         generation = backend.generation()

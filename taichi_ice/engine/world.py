@@ -157,7 +157,9 @@ class World:
                 backend.cpu_threads(),
             )
         self.stepping = stepping
-        self.options = options.replace(stepping=stepping, slots=self.layout.slots)
+        self.options = options.replace(
+            stepping=stepping, slots=self.layout.slots, integrator=self.layout.integrator
+        )
         # The parallel step on the CPU: one launch for many steps (``BodyTeam``); None
         # launches the two stages' kernels every step (GPU, or set to None to compare).
         threads = None

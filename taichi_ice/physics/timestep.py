@@ -29,23 +29,56 @@ from ..codes import BodyKind
 from ..errors import StabilityError
 from .polygon import longest_edge, mass_properties, min_width
 
-# dt = "auto" takes this fraction of the stability limit with Coulomb friction: a contact
-# oscillation then spans at least ~30 steps, so overlaps, contact widths and the friction
-# memory are resolved. A jam at full load survives 1.27-1.42 x the limit, so this keeps over
-# 6 x; accuracy, not stability, sets it (docs/accuracy.md, "So the default step"): over 256
-# pillar layouts Coulomb's statistics at 0.2 and 0.05 agree (peak force -0.6 % [-4.7, +3.5]).
+# How a step moves the bodies (``Options.integrator``): "euler", semi-implicit Euler with the
+# contact forces of the step's start (first order); "analytic", each contact's spring-dashpot
+# integrated exactly over the step (``physics.contact_step``; second order); "coupled", the
+# analytic step with each contact's normal and tangent solved together over the step
+# (``physics.contact_coupled``: the bodies' turning couples them); "midstep", the coupled
+# step with each contact linearised about the configuration predicted for mid-step (its
+# normal, point and lever arms: held at the step's start they are a first-order error of the
+# bodies' turn; ``reference_contact.contact_force``'s ``mid``).
+INTEGRATORS = ("euler", "analytic", "coupled", "midstep")
+
+# dt = "auto" takes this fraction of the stability limit with Coulomb friction and the Euler
+# step (and the analytic and coupled steps): a contact oscillation then spans at least ~30
+# steps, so overlaps, contact widths and the friction memory are resolved. A jam at full
+# load survives 1.27-1.42 x the limit, so this keeps over 6 x; accuracy, not stability, sets
+# it (docs/accuracy.md, "So the default step"): over 256 pillar layouts Coulomb's statistics
+# at 0.2 and 0.05 agree (peak force -0.6 % [-4.7, +3.5]).
 DEFAULT_SAFETY = 0.2
-# ... and with a law that has a memory (rate-and-state, steady-state, memory-only): over 256
-# pillar layouts the peak force at 0.2 and at 0.1 stands +9.8 % and +9.5 % above a sixteenth
-# of the default step (both p < 0.01), at 0.05 +0.4 % [-5.6, +6.4] (docs/accuracy.md).
+# ... and with Coulomb friction and the midstep step, Coulomb's default integrator since
+# 2026-12-02 (``default_integrator``): the largest of ``dem_stability.CANDIDATES`` that keeps
+# 2 x below the jam's limit (1.42 x: 2.37 x) with every error of Coulomb's within
+# ``dem_analysis.ACCURACY`` (the pillar's frictional energy 1.5 %, the offset collision's
+# spin 0.7 %; ``dem_accuracy``'s ``recommendation_by_law``), whose pillar statistics over 256
+# layouts agree with the Euler step's at 0.05 within 1.6 % (docs/accuracy.md, "So the
+# default step").
+MIDSTEP_SAFETY = 0.6
+# ... and with a law that has a memory (rate-and-state, steady-state, memory-only), with
+# every integrator: over 256 pillar layouts the Euler step's peak force at 0.2 and at 0.1
+# stands +9.8 % and +9.5 % above a sixteenth of the default step (both p < 0.01), at 0.05
+# +0.4 % [-5.6, +6.4]; the midstep step's at 0.4 +10.5 % (docs/accuracy.md).
 RATE_STATE_SAFETY = 0.05
 
 
-def default_safety(law: str) -> float:
+def default_integrator(law: str) -> str:
+    """The integrator a scene of the friction law named ``law`` (``Law.name``) steps with
+    unless its file or the engine's options name one: "midstep" for ``"coulomb"`` (second
+    order in a collision, and at three times the Euler step's default it holds the pillar's
+    statistics; docs/accuracy.md), "euler" for every law with a memory (the midstep step
+    does not take their pillar statistics past the Euler step's 0.05)."""
+    return "midstep" if law == "coulomb" else "euler"
+
+
+def default_safety(law: str, integrator: str | None = None) -> float:
     """The fraction of the stability limit ``dt = "auto"`` takes for the friction law named
-    ``law`` (``Law.name``): ``DEFAULT_SAFETY`` for ``"coulomb"``, ``RATE_STATE_SAFETY`` for
-    every law with a memory."""
-    return DEFAULT_SAFETY if law == "coulomb" else RATE_STATE_SAFETY
+    ``law`` stepped by ``integrator`` (None: the law's, ``default_integrator``):
+    ``MIDSTEP_SAFETY`` for Coulomb with the midstep step, ``DEFAULT_SAFETY`` for Coulomb
+    with the others, ``RATE_STATE_SAFETY`` for every law with a memory."""
+    if law != "coulomb":
+        return RATE_STATE_SAFETY
+    integrator = default_integrator(law) if integrator is None else integrator
+    return MIDSTEP_SAFETY if integrator == "midstep" else DEFAULT_SAFETY
 
 
 def oscillator_limit(k: float, c: float, m_eff: float) -> float:

@@ -141,11 +141,12 @@ class Simulation:
         )
         if friction is not None:
             scenes = [s.with_friction(friction) for s in scenes]
-        self.scenes = scenes
         if not isinstance(contacts, (bool, np.bool_)):
             raise UsageError(f"contacts must be True or False, got {contacts!r}")
         self.contacts = bool(contacts)
-        options = options_of(options, changes).resolved()
+        # The integrator decided (the option's, the files' or the laws'; dt = "auto" follows).
+        options, scenes = options_of(options, changes).resolved().for_scenes(scenes)
+        self.scenes = scenes = list(scenes)
         self.options = options
         self.arch, self.precision = options.arch, options.precision
         first = scenes[0].simulation

@@ -28,7 +28,7 @@ import numpy as np
 from ..codes import BodyKind
 from ..physics import polygon
 from ..physics.forcing import AIR_DENSITY, AIR_DRAG
-from ..physics.timestep import default_safety, stable_time_step
+from ..physics.timestep import default_integrator, default_safety, stable_time_step
 from ..readonly import frozen
 from ..tomlio import dump_toml
 
@@ -80,9 +80,14 @@ class SimulationSettings:
         series_interval: time between time-series samples, s.
         seed: seed of the field jitter (``numpy.random.default_rng``).
         dt_safety: fraction of the stability limit that ``dt = "auto"`` takes, in (0, 1];
-            ``None`` for the law's (``Scene.dt_safety``: 0.2 with Coulomb friction, 0.05 with
-            a law that has a memory; ``timestep.default_safety``).
+            ``None`` for the law's and integrator's (``Scene.dt_safety``: 0.6 with Coulomb
+            friction and the midstep step, 0.2 with Coulomb and another step, 0.05 with a
+            law that has a memory; ``timestep.default_safety``).
         force_dt: accept a ``dt`` above the stability limit (stability studies).
+        integrator: how a step moves the bodies, one of ``options.INTEGRATORS``, or ``None``
+            for ``"auto"``: the law's (``Scene.integrator``: "midstep" with Coulomb
+            friction, "euler" with a law that has a memory; ``timestep.default_integrator``).
+            The engine's ``Options.integrator`` (``--integrator``), when given, wins.
     """
 
     duration: float
@@ -92,6 +97,7 @@ class SimulationSettings:
     seed: int = 0
     dt_safety: float | None = None
     force_dt: bool = False
+    integrator: str | None = None
 
 
 @dataclass(frozen=True)
@@ -450,13 +456,34 @@ class Scene:
         )
 
     @property
+    def integrator(self) -> str:
+        """How a step moves the bodies: the file's ``[simulation] integrator``, or the law's
+        (``timestep.default_integrator``: "midstep" with Coulomb friction, "euler" with a law
+        that has a memory; docs/accuracy.md, "So the default step")."""
+        named = self.simulation.integrator
+        return named if named is not None else default_integrator(self.friction.name)
+
+    @property
     def dt_safety(self) -> float:
         """The fraction of the stability limit ``dt = "auto"`` takes: the file's
-        ``[simulation] dt_safety``, or the law's (``timestep.default_safety``: 0.2 with
-        Coulomb friction, 0.05 with rate and state, whose pillar statistics are not
-        converged at 0.2 or 0.1; docs/accuracy.md)."""
+        ``[simulation] dt_safety``, or the law's with its integrator
+        (``timestep.default_safety``: 0.6 with Coulomb friction and the midstep step, 0.2
+        with Coulomb and the others, 0.05 with rate and state, whose pillar statistics are
+        not converged at 0.2 or 0.1; docs/accuracy.md)."""
         sim = self.simulation
-        return sim.dt_safety if sim.dt_safety is not None else default_safety(self.friction.name)
+        if sim.dt_safety is not None:
+            return sim.dt_safety
+        return default_safety(self.friction.name, self.integrator)
+
+    def with_integrator(self, integrator: str) -> Scene:
+        """The same scene stepped by ``integrator`` (``options.INTEGRATORS``), its
+        ``dt = "auto"`` the fraction of the limit the law takes with it; the engine's
+        ``Options.integrator`` applied to a scene. ``text`` is unchanged: a run records its
+        integrator beside it (run files, checkpoints)."""
+        if integrator == self.integrator:
+            return self
+        sim = dataclasses.replace(self.simulation, integrator=integrator)
+        return dataclasses.replace(self, simulation=sim)
 
     @cached_property
     def dt(self) -> float:

@@ -25,6 +25,7 @@ from ..codes import BodyKind
 from ..errors import ScenarioError
 from ..physics import polygon
 from ..physics.forcing import coriolis_parameter
+from ..physics.timestep import INTEGRATORS
 from ..readonly import frozen
 from .floes import FILE_KEYS, FileField, parse_file_field
 from .grid import ForcingGrid, read_grid
@@ -151,6 +152,8 @@ def parse_simulation(source: str, data: Any) -> SimulationSettings:
     if dt_safety is not None and not 0.0 < dt_safety <= 1.0:
         raise t.error("dt_safety", f"must be in (0, 1], got {dt_safety:g}")
     force_dt = t.boolean("force_dt", False)
+    integrator = t.string("integrator", "auto", choices=("auto", *INTEGRATORS))
+    integrator = None if integrator == "auto" else integrator  # None: the law's
     if dt is not None:
         for name, interval in (
             ("output_interval", output_interval),
@@ -163,7 +166,7 @@ def parse_simulation(source: str, data: Any) -> SimulationSettings:
                     f'dt = "auto"), or raise {name}',
                 )
     return SimulationSettings(
-        duration, dt, output_interval, series_interval, seed, dt_safety, force_dt
+        duration, dt, output_interval, series_interval, seed, dt_safety, force_dt, integrator
     )
 
 

@@ -96,13 +96,14 @@ def bench_command(args) -> int:
         "arch": args.arch,
         "steps": steps,
         "threads": args.threads,
-        "integrator": getattr(args, "integrator", "euler"),
+        "integrator": getattr(args, "integrator", None),
         "dt_safety": getattr(args, "dt_safety", None),
     }
+    stepped_by = common["integrator"] or "the law's integrator"
     print(
         f"bench: {args.scene} box, {args.arch} {'/'.join(precisions)}, {args.law}"
         f"{', water' if args.water else ''}{', energy budget' if args.energy else ''}, "
-        f"{common['integrator']} at "
+        f"{stepped_by} at "
         f"{common['dt_safety'] or 'the scene default'} of the stability limit, "
         f"{steps} steps per size" + (f", Box2D v3 {box2d.version()}" if box2d_spec else ""),
         file=sys.stderr,

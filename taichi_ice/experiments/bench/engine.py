@@ -114,9 +114,9 @@ def measure_size(spec: dict) -> dict:
     ``spec`` holds ``scene``, ``blocks``, ``law``, ``water``, ``energy`` (keep the budget;
     default off), ``seed``, ``cache`` (a folder for the placement, shared by the runs of a
     size, or None), ``arch``, ``precision``, ``steps``, ``threads``, ``integrator`` (default
-    euler) and ``dt_safety`` (the step as a fraction of the stability limit; None: the
-    scene's), and ``box2d`` (None, or the ``dt``, ``substeps`` and list of ``threads`` of
-    ``compare_box2d``).
+    None: the law's, ``timestep.default_integrator``) and ``dt_safety`` (the step as a
+    fraction of the stability limit; None: the scene's), and ``box2d`` (None, or the ``dt``,
+    ``substeps`` and list of ``threads`` of ``compare_box2d``).
     """
     from ... import backend
 
@@ -142,7 +142,7 @@ def measure_size(spec: dict) -> dict:
         [scene],
         precision=spec["precision"],
         energy=spec.get("energy", False),
-        integrator=spec.get("integrator", "euler"),
+        integrator=spec.get("integrator"),
         dt=None if safety is None else safety * scene.stable_dt,
     )
     ti.sync()

@@ -536,13 +536,24 @@ def analyse(parts: dict[str, Any], runs_dir: Path, cfg: dict[str, Any], log=prin
         summary["recommendation"] = {
             integ: _recommend(points, limits, integ) for integ, limits in stability.items()
         }
+        # The same rule on one law's errors alone: a default step may follow the law
+        # (timestep.default_safety).
+        laws = sorted({p["law"] for p in points})
+        summary["recommendation_by_law"] = {
+            integ: {law: _recommend(points, limits, integ, law) for law in laws}
+            for integ, limits in stability.items()
+        }
     _report(summary, log)
     return summary
 
 
-def _recommend(points, limits: dict[str, Any], integrator: str) -> dict[str, Any]:
-    """``dem_stability.recommend`` for one integrator, with its errors there and at 0.2."""
-    funcs = {m: error_at(points, m, integrator) for m in ACCURACY}
+def _recommend(
+    points, limits: dict[str, Any], integrator: str, law: str | None = None
+) -> dict[str, Any]:
+    """``dem_stability.recommend`` for one integrator, with its errors there and at 0.2: on
+    the largest error over the laws, or on ``law``'s alone."""
+    only = f"/{law}" if law else ""
+    funcs = {m: error_at(points, m + only, integrator) for m in ACCURACY}
     # Only the measures this run has float64 errors of (--quick has fewer).
     accuracy = {m: a for m, a in ACCURACY.items() if funcs[m](0.1) is not None}
     rec = dem_stability.recommend(limits, funcs, accuracy)
@@ -566,9 +577,11 @@ def _report(summary: dict[str, Any], log) -> None:
             f"{c['departed_at']} s and part at {c['parted_at']} s (of {c['until']:g} s)"
         )
     for integ, rec in summary.get("recommendation", {}).items():
+        by_law = summary.get("recommendation_by_law", {}).get(integ, {})
         log(
             f"dem accuracy [{integ}]: stable ratios {summary['stability_ratio'][integ]}; "
             f"recommended dt_safety {rec['dt_safety']}, margin in the jam {rec['jam_margin']}"
+            + "".join(f"; {law} alone {r['dt_safety']}" for law, r in by_law.items())
         )
 
 

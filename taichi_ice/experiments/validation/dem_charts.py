@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ...physics.timestep import DEFAULT_SAFETY, MIDSTEP_SAFETY
 from .dem_analysis import MEASURES, PART, integrator_of, label
 
 # Colour of each law with each integrator (``dem_analysis.label``), marker of each integrator.
@@ -139,7 +140,7 @@ def plot_accuracy(summary: dict[str, Any], path: Path) -> None:
 def plot_stability(summary: dict[str, Any], path: Path) -> None:
     from ...run.plots import subplots
 
-    fig, (ax, ax2) = subplots(1, 2, figsize=(13, 4.8), layout="constrained")
+    fig, (ax, ax2) = subplots(1, 2, figsize=(13, 6.0), layout="constrained")
     for name, c in summary.get("chaos", {}).items():
         gap = np.maximum(np.asarray(c["largest_gap_m"]), 1e-17)
         ax.semilogy(
@@ -149,19 +150,27 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
             lw=1.4,
             label=f"{name}: last bit of one x (dt = {c['ratio']:.2g} stable)",
         )
-    for pair in summary.get("pillar_parting_at_a_quarter_step", []):
-        if pair["precision"] != "f64" or "time" not in pair:
-            continue
+    pairs = [
+        p
+        for p in summary.get("pillar_parting_at_a_quarter_step", [])
+        if p["precision"] == "f64" and "time" in p
+    ]
+    named = set()  # one legend entry per law and integrator, for all its steps
+    for pair in pairs:
+        who = label(pair["law"], integrator_of(pair))
+        steps = sorted({p["ratio"] for p in pairs if label(p["law"], integrator_of(p)) == who})
         ax.semilogy(
             pair["time"],
             np.maximum(pair["largest_gap_m"], 1e-17),
             ls="--",
-            color=COLORS[label(pair["law"], integrator_of(pair))],
+            color=COLORS[who],
             alpha=0.5,
             lw=0.9,
-            label=f"{label(pair['law'], integrator_of(pair))}: dt = {pair['ratio']:.2g} "
-            "vs a quarter",
+            label=None
+            if who in named
+            else f"{who}: dt = {', '.join(f'{r:.2g}' for r in steps)} vs a quarter",
         )
+        named.add(who)
     ax.axhline(PART, color="0.5", lw=0.8)
     ax.text(0.2, PART * 1.5, f"parted ({PART * 100:g} cm)", fontsize=8, color="0.3")
     ax.set_xlabel("time (s)")
@@ -196,15 +205,23 @@ def plot_stability(summary: dict[str, Any], path: Path) -> None:
     ax2.set_xticks([0.2, 0.5, 1.0, 2.0, 3.0])
     ax2.axvline(1.0, color="k", lw=0.8)
     ax2.text(1.02, -0.5, "computed limit", fontsize=8)
-    ax2.axvline(0.2, color="0.5", ls=":", lw=1.0)
-    ax2.text(0.205, -0.5, "default 0.2", fontsize=8, color="0.3")
+    ax2.axvline(DEFAULT_SAFETY, color="0.5", ls=":", lw=1.0)
+    ax2.text(DEFAULT_SAFETY * 1.02, -0.5, f"Euler {DEFAULT_SAFETY:g}", fontsize=8, color="0.3")
+    ax2.axvline(MIDSTEP_SAFETY, color="0.5", ls="--", lw=1.0)
+    ax2.text(
+        MIDSTEP_SAFETY * 1.02,
+        -0.3,
+        f"midstep {MIDSTEP_SAFETY:g} (Coulomb's default)",
+        fontsize=8,
+        color="0.3",
+    )
     for k, (integ, rec) in enumerate(recs.items()):
         if rec.get("dt_safety"):
             color = INTEGRATOR_COLORS.get(integ, "k")
             ax2.axvline(rec["dt_safety"], color=color, ls="--", lw=1.0)
             ax2.text(
                 rec["dt_safety"] * 1.02,
-                len(rows) - 0.55 - 0.35 * k,
+                len(rows) - 0.55 - 0.6 * k,
                 f"recommended {rec['dt_safety']:g} ({integ})",
                 fontsize=8,
                 color=color,
@@ -370,6 +387,15 @@ def tables(summary: dict[str, Any]) -> str:
             f"\nRecommended `dt_safety` with the {integ} integrator: **{rec['dt_safety']}** "
             f"({rec['rule']}).\n"
         )
+        by_law = summary.get("recommendation_by_law", {}).get(integ, {})
+        for law, r in by_law.items():
+            why = r["refused"].get(_next_candidate(r, r["dt_safety"]), "")
+            out.append(
+                f"- on {law}'s errors alone: **{r['dt_safety']}**, margin in the jam "
+                f"{_fmt(r['jam_margin'], '.2f')}" + (f" (the next refused: {why})" if why else "")
+            )
+        if by_law:
+            out.append("")
         names = list(next(iter(rec["candidates"].values()))["errors"])
         out.append("| dt_safety | margin in the jam | " + " | ".join(names) + " |")
         out.append("|---:|---:|" + "---:|" * len(names))
@@ -380,6 +406,15 @@ def tables(summary: dict[str, Any]) -> str:
                 + " |"
             )
     return "\n".join(out) + "\n"
+
+
+def _next_candidate(rec: dict[str, Any], chosen) -> str | None:
+    """The candidate after ``chosen`` in a recommendation's table (None past the last)."""
+    keys = list(rec["candidates"])
+    if chosen is None:
+        return keys[0] if keys else None
+    at = keys.index(f"{chosen:g}") if f"{chosen:g}" in keys else len(keys)
+    return keys[at + 1] if at + 1 < len(keys) else None
 
 
 __all__ = ["plot_accuracy", "plot_stability", "tables"]

@@ -533,3 +533,36 @@ def test_the_ensemble_runs_the_cases_and_layouts_asked_for(tmp_path, capsys):
     assert runs[0]["seeds"] == runs[1]["seeds"]
     ((key, c),) = summary["comparisons"].items()
     assert key == "rate-state: euler 0.8 against euler 0.2" and c["peak_force"]["n"] == 3
+
+
+def test_dem_ensemble_runs_the_coulomb_worlds_at_the_mu_asked_and_refuses_a_bad_one(
+    monkeypatch, capsys
+):
+    """``--mu 0.9`` runs the pillar's Coulomb worlds at mu = 0.9 (rate and state's are left
+    alone), and a coefficient that is not a positive number is refused in one line."""
+    from taichi_ice.commands import validate
+    from taichi_ice.experiments import ensemble
+    from taichi_ice.experiments.validation import dem_ensemble
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def capture(scene, seeds, until, options):
+        seen.append((scene.friction, len(seeds), options.integrator))
+        raise Stop
+
+    monkeypatch.setattr(ensemble, "run_ensemble", capture)
+    for law in ("coulomb", "rate-state"):
+        with pytest.raises(Stop):
+            dem_ensemble.run_case(law, "midstep", 0.6, 3, 1.0, mu=0.9)
+    (coulomb, n, integrator), (memory, _, _) = seen
+    assert (coulomb.name, coulomb.mu, n, integrator) == ("coulomb", 0.9, 3, "midstep")
+    assert memory.name == "rate-state"
+    for bad in ("-1", "nan", "x"):
+        with pytest.raises(SystemExit) as exc:
+            validate.main(["dem_ensemble", "--mu", bad, "--out", "unused"])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert "a friction coefficient is a number > 0" in err and "Traceback" not in err

@@ -101,6 +101,14 @@ def build_parser() -> argparse.ArgumentParser:
                 help="only these friction laws, comma-separated: coulomb, rate-state "
                 "(default: both; --quick: coulomb)",
             )
+            p.add_argument(
+                "--mu",
+                type=_mu,
+                default=None,
+                metavar="MU",
+                help="the Coulomb worlds' friction coefficient (default the pillar scene's, "
+                "0.5), e.g. 0.9, the paper's jamming model",
+            )
         if name == "speed_accuracy":
             p.add_argument("--arch", default="cpu", help="Taichi arch (cpu or gpu)")
             p.add_argument("--interfaces", type=int, default=None, help="interfaces timed")
@@ -120,6 +128,17 @@ def _listed(text: str, known, what: str) -> tuple[str, ...]:
             f"{', '.join(known)}, comma-separated"
         )
     return names
+
+
+def _mu(text: str) -> float:
+    """A friction coefficient: a number > 0; else one line saying so."""
+    try:
+        mu = float(text)
+    except ValueError:
+        mu = float("nan")
+    if not mu > 0.0 or mu == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r}: a friction coefficient is a number > 0")
+    return mu
 
 
 def _integrators(text: str) -> tuple[str, ...]:
@@ -196,6 +215,7 @@ def main(argv: list[str] | None = None) -> int:
             layouts=args.layouts,
             cases=args.cases,
             laws=args.laws,
+            mu=args.mu,
         )
     elif args.study == "speed_accuracy":
         if args.worker:

@@ -138,13 +138,19 @@ def mcnemar(base, other) -> dict[str, Any]:
     }
 
 
-def run_case(law: str, integrator: str, ratio: float, layouts: int, until: float) -> dict:
-    """``layouts`` pillar layouts as one batch: each one's metrics (``metrics.run_metrics``)."""
+def run_case(
+    law: str, integrator: str, ratio: float, layouts: int, until: float, mu: float | None = None
+) -> dict:
+    """``layouts`` pillar layouts as one batch: each one's metrics (``metrics.run_metrics``);
+    ``mu``: the Coulomb worlds' friction coefficient (None: the scene's)."""
     from ...engine.options import Options
+    from ...physics.friction import Coulomb
     from ..ensemble import run_ensemble
     from . import dem_accuracy, dem_scenes
 
     scene = dem_scenes.pillar(law)
+    if mu is not None and law == "coulomb":
+        scene = scene.with_friction(Coulomb(mu=mu))
     dt = dem_accuracy.field_step(ratio, scene.stable_dt)
     own = scene.simulation.seed  # the paper's layout first, then reseeded ones
     seeds = [own, *[s for s in range(layouts + 1) if s != own][: layouts - 1]]
@@ -258,9 +264,11 @@ def plot(summary: dict[str, Any], path: Path) -> None:
                 fontsize=7,
             )
             ax.set_title(f"{law}: {m}", fontsize=9)
+    mu = summary["settings"].get("mu")
     fig.suptitle(
         f"Pillar scene over {summary['settings']['layouts']} layouts, "
-        f"{summary['settings']['until_s']:g} s: "
+        + (f"Coulomb mu = {mu:g}, " if mu else "")
+        + f"{summary['settings']['until_s']:g} s: "
         "each integrator and dt / stable_dt (mean, 95 % interval, layouts as dots); shaded: "
         "the default's mean +- 1.96 standard errors",
         fontsize=10,
@@ -308,6 +316,7 @@ def run(
     layouts: int | None = None,
     cases=None,
     laws=None,
+    mu: float | None = None,
 ) -> dict[str, Any]:
     """Every case of every law, the comparisons, ``dem_ensemble.json`` and ``.png``.
 
@@ -315,7 +324,8 @@ def run(
     same layouts and length, and run only the cases it lacks. ``layouts``: how many (default
     ``LAYOUTS``; quick 2): the paired intervals narrow as 1/sqrt(layouts). ``cases``: run only
     these ``(integrator, dt / stable_dt)`` and the comparisons among them (``select``).
-    ``laws``: run only these of ``LAWS``.
+    ``laws``: run only these of ``LAWS``. ``mu``: the Coulomb worlds' friction coefficient
+    (None: the pillar scene's, 0.5); recorded, and a record of another is not reused.
     """
     from ... import backend
 
@@ -364,11 +374,12 @@ def run(
     if reuse and path.is_file():
         old = json.loads(path.read_text())
         was = old["settings"].get("slide_resolution", 0.0)
-        same = (old["settings"]["layouts"], old["settings"]["until_s"], was) == (
-            cfg["layouts"],
-            cfg["until"],
-            slide,
-        )
+        same = (
+            old["settings"]["layouts"],
+            old["settings"]["until_s"],
+            was,
+            old["settings"].get("mu"),
+        ) == (cfg["layouts"], cfg["until"], slide, mu)
         if same:
             kept = {(r["law"], r["integrator"], round(r["nominal"], 6)): r for r in old["runs"]}
     runs = []
@@ -376,7 +387,7 @@ def run(
         for integ, ratio in cfg["cases"]:
             r = kept.get((law, integ, round(ratio, 6)))
             if r is None:
-                r = run_case(law, integ, ratio, cfg["layouts"], cfg["until"])
+                r = run_case(law, integ, ratio, cfg["layouts"], cfg["until"], mu)
                 r["nominal"] = ratio
             runs.append(r)
             log(
@@ -389,6 +400,7 @@ def run(
             "layouts": cfg["layouts"],
             "until_s": cfg["until"],
             "slide_resolution": slide,
+            "mu": mu,
             "laws": list(cfg["laws"]),
             "cases": [list(c) for c in cfg["cases"]],
             "comparisons": [[list(a), list(b)] for a, b in cfg["comparisons"]],

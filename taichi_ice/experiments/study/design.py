@@ -51,9 +51,11 @@ STRATA = (0.85, 0.775)
 CONTROL = 0.70
 # Each stratum's seeds start at its index in (0.85, 0.775, 0.70) x SEED_BLOCK.
 SEED_BLOCK = 100_000
-# The step arm: every model at 0.1 of the limit, half the Coulomb default (0.2); the laws
-# with a memory default to 0.05 (timestep.RATE_STATE_SAFETY) since 2026-11-28, so for them
-# the arm is twice their default step: the step at which their peak force reads high.
+# The step arm: every model at 0.1 of the limit, half the Euler step's 0.2 (Coulomb's default
+# until 2026-12-02, and the step of the committed study; since then Coulomb's default is the
+# midstep step at 0.6, which the arm then runs at a sixth of it); the laws with a memory
+# default to 0.05 (timestep.RATE_STATE_SAFETY) since 2026-11-28, so for them the arm is
+# twice their default step: the step at which their peak force reads high.
 STEP_SAFETY = DEFAULT_SAFETY / 2.0
 STRENGTHS = (1e6, 3e6)  # Pa: [ice] crushing_strength
 # What each world keeps: every run metric (experiments.metrics.METRICS) but the time of

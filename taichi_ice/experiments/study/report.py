@@ -375,9 +375,10 @@ def study_markdown(s: dict) -> str:
         lines += [
             f"## The step's bias: {step['arm']} against {step['against']}",
             "",
-            f"The same layouts at {step['dt_safety']:g} x the stable limit (half the default "
-            "with Coulomb friction; the laws with a memory default to 0.05 since 2026-11-28, a "
-            "study run before ran them at 0.2). "
+            f"The same layouts at {step['dt_safety']:g} x the stable limit (half the Euler "
+            "step's 0.2, Coulomb's default until 2026-12-02, since then the midstep step at "
+            "0.6; the laws with a memory default to 0.05 since 2026-11-28, a study run before "
+            "ran them at 0.2). "
             "Shift: this step minus default, mean over layouts [bootstrap CI]; shift / SE: its "
             "size against the standard error of the stratum's mean at the default step (the "
             "claims' sampling error; below 1: smaller).",

@@ -1238,7 +1238,7 @@ def test_forced_unstable_run_stops_with_a_readable_failed_file(tmp_path, run_opt
 # --------------------------------------------------------------------------------------------
 
 
-def test_crushing_caps_the_force_and_books_the_lost_energy(run_opts):
+def test_crushing_caps_the_force_and_books_the_lost_energy(run_opts, precision):
     """Two squares meet face-on at 1 m/s with an ice strength whose cap (strength x thickness
     x width = 30 kN) is under a third of the peak without it (~100 kN): the contact force
     never exceeds the cap, the overlap beyond it is not recovered (the rebound keeps at most
@@ -1258,7 +1258,11 @@ def test_crushing_caps_the_force_and_books_the_lost_energy(run_opts):
     peak_crushed = np.max(np.linalg.norm(crushed["probe_force"][:, 0, :], axis=1))
     peak_elastic = np.max(np.linalg.norm(elastic["probe_force"][:, 0, :], axis=1))
     assert peak_elastic > 3 * cap  # the cap matters
-    assert peak_crushed <= cap * (1 + 1e-9)
+    # To the precision's round-off: in float32 30 kN has an ulp of 2e-3 N, and the midstep
+    # step's probe force there came out one ulp above the cap (30000.0019 N; Vulkan lane,
+    # 2026-12-02), the Euler step's on it.
+    ulp = 1e-9 if precision == "f64" else float(np.finfo(np.float32).eps)
+    assert peak_crushed <= cap * (1 + ulp)
     after = sim.energies(0)
     elastic_at_cap = 0.5 * cap**2 / (strong.ice.contact_stiffness * width)
     assert after["kinetic_energy"] < elastic_at_cap  # the crushed overlap gave nothing back

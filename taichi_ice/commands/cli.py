@@ -127,8 +127,8 @@ def _run_scene(args, scene, out: str) -> int:
     law = sim.scenes[0].friction
     ran = sim.arch_used if sim.arch_used == args.arch else f"{sim.arch_used} (--arch {args.arch})"
     print(
-        f"{args.scene}: {scene.n_bodies} bodies, {law!r}, dt = {sim.dt:.3g} s "
-        f"(limit {sim.world.stable_dt:.3g} s), {ran}/{args.precision}"
+        f"{args.scene}: {scene.n_bodies} bodies, {law!r}, {sim.options.integrator} step, "
+        f"dt = {sim.dt:.3g} s (limit {sim.world.stable_dt:.3g} s), {ran}/{args.precision}"
         + (f"; {sim.dt_note}" if sim.dt_note else "")
         + (f"; WARNING: {sim.forced_note}" if sim.forced_note else ""),
         file=sys.stderr,

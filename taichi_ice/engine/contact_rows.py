@@ -48,7 +48,6 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..codes import BodyKind
-from ..physics.polygon import overlap
 from ..physics.slip import NO_INTERFACE_ABOVE
 from .reference import ReferenceModel, outline
 from .reference_contact import ContactMemory, contact_force
@@ -298,12 +297,7 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
             )
             if c is None:
                 continue
-            # The overlap of the pose the step takes the contact at (``c``'s point, normal
-            # and width are the mid-step's where the outlines overlap there).
-            area = c.area
-            if at_mid is not None:
-                area = overlap(at_mid[0], at_mid[1]).area or area
-            rows.append((o, p, origin, c, memory, area))
+            rows.append((o, p, origin, c, memory))
         out.append(_tabulate(rows, sl.start, layout.rate_state, model, world.dt))
     return out
 
@@ -311,11 +305,13 @@ def contact_rows(world) -> list[dict[str, np.ndarray]]:
 def _tabulate(rows, start: int, rate_state: bool, model: ReferenceModel, dt: float) -> dict:
     """The rows of one world as arrays (``ROW_NAMES``)."""
     table = empty_rows(len(rows))
-    for k, (o, p, origin, c, memory, area) in enumerate(rows):
+    for k, (o, p, origin, c, memory) in enumerate(rows):
         table["body_a"][k], table["body_b"][k] = o - start, p - start
         table["point"][k] = origin + c.point
         table["normal"][k] = c.normal
-        table["width"][k], table["overlap"][k] = c.width, area
+        # The overlap of the pose the step takes the contact at (the mid-step pose's with
+        # the midstep step), as its point, normal and width.
+        table["width"][k], table["overlap"][k] = c.width, c.step_area
         table["force_normal"][k], table["force_tangential"][k] = c.normal_force, c.tangential_force
         table["mu"][k] = c.mu
         table["stuck"][k] = 0 if c.sliding else 1

@@ -97,6 +97,9 @@ class ContactForce(NamedTuple):
             0 for the Euler step).
         booking: the analytic step's ``SETTLE_LANES`` values (``settle``), None where the
             step is not solved over (Euler's, or a pair it cannot solve).
+        step_area: the overlap area (m^2) at the pose the step takes the contact at, whose
+            point, normal and width are those above: the mid-step pose's with ``mid`` where
+            the outlines overlap there, else ``area``.
     """
 
     area: float
@@ -123,6 +126,7 @@ class ContactForce(NamedTuple):
     shift_torque_partner: float = 0.0
     sliding: bool = False
     booking: tuple | None = None
+    step_area: float | None = None
 
 
 def _cross(a, b) -> float:
@@ -395,6 +399,7 @@ def contact_force(
         )
     return ContactForce(
         area=area,
+        step_area=depth_area,
         point=point,
         normal=normal,
         width=width,

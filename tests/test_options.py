@@ -36,6 +36,16 @@ def test_a_bad_option_is_refused_when_made_naming_it(change, words):
     assert words in str(info.value)
 
 
+def test_a_simulation_without_its_energy_budget_is_refused_in_one_line():
+    """A Simulation's series, run files and divergence check read the budget: energy=False
+    is refused when it is made, naming the option and the World that steps without one
+    (it used to fail inside the constructor asking for energy=True)."""
+    from taichi_ice import Simulation, load_scenario
+
+    with pytest.raises(UsageError, match=r"energy=False.*World\(scenes, energy=False\)"):
+        Simulation(load_scenario("two_squares"), energy=False)
+
+
 def test_the_time_step_is_decided_once_against_the_stability_limit():
     """dt None is the smallest of the scenes' dt; a dt above the smallest stability limit is
     refused, naming both, unless forced."""

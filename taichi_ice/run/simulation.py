@@ -92,7 +92,8 @@ class Simulation:
             independent worlds.
         friction: a ``Coulomb`` or ``RateState`` law that replaces the scenes' own.
         options: the engine's settings (``options.Options``: arch, precision, dt, force_dt,
-            slots, stepping, energy); arch and precision None are what Taichi already runs
+            slots, stepping, integrator; ``energy`` must stay True: a Simulation's outputs
+            are its budget's, ``World(scenes, energy=False)`` steps without one); arch and precision None are what Taichi already runs
             in this process, else 'cpu' and 'f64'; dt None is the scenes'. A dt is refused
             above the stability limit unless ``force_dt``; it is shortened to a whole number
             of steps per sample and frame (``dt_note`` says so).
@@ -146,6 +147,15 @@ class Simulation:
         self.contacts = bool(contacts)
         # The integrator decided (the option's, the files' or the laws'; dt = "auto" follows).
         options, scenes = options_of(options, changes).resolved().for_scenes(scenes)
+        if not options.energy:
+            # Its series, run files, residual warning and the check that no world creates
+            # energy all read the budget (without, it failed later, asking for energy=True).
+            raise UsageError(
+                "Simulation keeps the energy budget (its series, run files and the check "
+                "that no world creates energy read it): energy=False is an option of a World "
+                "stepped directly (World(scenes, energy=False): the same trajectories, no "
+                "budget); drop energy=False here"
+            )
         self.scenes = scenes = list(scenes)
         self.options = options
         self.arch, self.precision = options.arch, options.precision

@@ -93,10 +93,11 @@ class Simulation:
         friction: a ``Coulomb`` or ``RateState`` law that replaces the scenes' own.
         options: the engine's settings (``options.Options``: arch, precision, dt, force_dt,
             slots, stepping, integrator; ``energy`` must stay True: a Simulation's outputs
-            are its budget's, ``World(scenes, energy=False)`` steps without one); arch and precision None are what Taichi already runs
-            in this process, else 'cpu' and 'f64'; dt None is the scenes'. A dt is refused
-            above the stability limit unless ``force_dt``; it is shortened to a whole number
-            of steps per sample and frame (``dt_note`` says so).
+            are its budget's, ``World(scenes, energy=False)`` steps without one); arch and
+            precision None are what Taichi already runs in this process, else 'cpu' and
+            'f64'; dt None is the scenes'. A dt is refused above the stability limit
+            unless ``force_dt``; it is shortened to a whole number of steps per sample and
+            frame (``dt_note`` says so).
         **changes: options by name, for short (``Simulation(scene, dt=1e-4, arch="gpu")``).
         worlds: what makes the World, called with the scenes and the Options; default: this
             process's ``pool.POOL`` hands out a World of the same layout that no one uses

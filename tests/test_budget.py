@@ -169,3 +169,29 @@ def test_a_launchs_samples_judged_at_once_as_one_by_one():
             )
             assert bool(tripped[s, w]) == rule
     assert 0 < tripped.sum() < tripped.size
+
+
+def test_a_budget_that_misses_by_more_than_a_tenth_is_named_in_a_warning():
+    """``budget.residual_warning`` on energy tables made by hand. Each world started with
+    100 J of kinetic energy and was pushed with 50 J: 150 J came in. One holds 60 J kinetic
+    and 5 J elastic and dissipated 40 J by friction and 10 J in its dashpots: 115 J, a
+    residual of 35 J, 23.3 % (warned, and named when it is one of several); the other
+    accounts for 145 J: 3.3 % (no warning). A world into which nothing came never counts."""
+    from taichi_ice.codes import EnergyTerm as T
+
+    def table(*rows):
+        out = np.zeros((len(rows), len(T)))
+        for w, row in enumerate(rows):
+            for term, value in row.items():
+                out[w, term] = value
+        return out
+
+    start = table({T.KINETIC: 100.0}, {T.KINETIC: 100.0}, {})
+    close = {T.KINETIC: 90.0, T.ELASTIC: 5.0, T.FRICTION: 45.0, T.VISCOUS: 5.0, T.WORK_IN: 50.0}
+    off = {T.KINETIC: 60.0, T.ELASTIC: 5.0, T.FRICTION: 40.0, T.VISCOUS: 10.0, T.WORK_IN: 50.0}
+    said = budget.residual_warning(table(close, off, {}), start)
+    assert said.startswith("world 1's energy budget misses by 23.3 % of the energy in")
+    assert f"bound {100 * budget.RESIDUAL_WARNING:g} %" in said and "lower dt" in said
+    assert budget.residual_warning(table(close, close, {}), start) == ""
+    alone = budget.residual_warning(table(off), start[:1])
+    assert alone.startswith("the run's energy budget misses by 23.3 %")

@@ -47,11 +47,6 @@ FLUSH_BYTES = 64 << 20
 # integers (``World.advance_sampled``), and a dt this small is a mistake, not a run.
 MAX_STEPS_PER_FRAME = 2**31 - 1
 
-# A run whose energy budget misses by more than this fraction of the energy that came in is
-# marked with a warning (file attribute ``warning``, ``RunResult.warning``, the summary line).
-# The landed scenes closed within 8 % when this was set; a body 1e12 m out missed by 33 %.
-RESIDUAL_WARNING = 0.1
-
 
 @dataclass
 class RunResult:
@@ -64,7 +59,7 @@ class RunResult:
         dt: time step (s). wall_time: seconds of wall clock.
         status: 'complete' or 'failed'. failure: the error message if failed.
         warning: why the result is suspect ("" if not): a dt forced above the stability
-            limit, a budget residual past ``RESIDUAL_WARNING``.
+            limit, a budget residual past ``budget.RESIDUAL_WARNING``.
     """
 
     series: list[dict[str, np.ndarray]]
@@ -506,25 +501,9 @@ class Simulation:
         )
 
     def _budget_warning(self) -> str:
-        """A warning when a world's energy budget misses by more than RESIDUAL_WARNING."""
-        now = self.world.energies()
-        worst, where = 0.0, 0
-        for w in range(len(self.scenes)):
-            rel = float(
-                budget.relative_residual(
-                    budget.as_series(now[w]), budget.as_series(self.initial_energy[w])
-                )
-            )
-            if abs(rel) > abs(worst):  # NaN (nothing came in) never counts
-                worst, where = rel, w
-        if abs(worst) <= RESIDUAL_WARNING:
-            return ""
-        label = f"world {where}" if len(self.scenes) > 1 else "the run"
-        return (
-            f"{label}'s energy budget misses by {100 * worst:.3g} % of the energy in (bound "
-            f"{100 * RESIDUAL_WARNING:g} %): the result is suspect; lower dt, or check the "
-            "scene (a body far from the others, a tiny block)"
-        )
+        """A warning when a world's energy budget misses by more than
+        ``budget.RESIDUAL_WARNING`` (``budget.residual_warning``)."""
+        return budget.residual_warning(self.world.energies(), self.initial_energy)
 
     def _result(
         self, series, paths, status: str, failure: str, start: float, steps: int

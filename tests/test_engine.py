@@ -127,9 +127,15 @@ def f64(taichi_runtime: tuple[str, str]) -> None:
 
 
 def cluster_scene_dict(
-    seed: int, n: int, law: str = "coulomb", water: bool = False, speed: float = 1.5
+    seed: int,
+    n: int,
+    law: str = "coulomb",
+    water: bool = False,
+    speed: float = 1.5,
+    sides: int = 0,
 ) -> dict:
-    """A few jittered rectangles and diamonds closing in on each other, gaps of 0.2-2 mm.
+    """A few jittered rectangles and diamonds closing in on each other, gaps of 0.2-2 mm
+    (``sides`` > 0: polygons of that many vertices inscribed in ellipses instead).
 
     Each block comes from a random direction toward the centre of those already placed, is
     slid in until it would touch one (bisection on the separating-axis test) and backed off
@@ -144,6 +150,10 @@ def cluster_scene_dict(
         width, length = rng.uniform(0.5, 1.0, 2)
         angle = float(rng.uniform(-np.pi, np.pi))
         outline = (rectangle if shape == "rectangle" else diamond)(width, length)
+        if sides:
+            turn = 2.0 * np.pi * np.arange(sides) / sides
+            outline = 0.5 * np.stack([width * np.cos(turn), length * np.sin(turn)], axis=1)
+            shape = "polygon"
         local = transform(outline, [0.0, 0.0], angle)
         direction = np.zeros(2)
         position = np.zeros(2)
@@ -171,6 +181,9 @@ def cluster_scene_dict(
                 "omega": float(rng.uniform(-1.0, 1.0)),
             }
         )
+        if sides:
+            del bodies[-1]["width"], bodies[-1]["length"]
+            bodies[-1]["vertices"] = outline.tolist()
     # dt_safety 0.2 for every law: the step these clusters were written at (their collisions
     # and list rebuilds within a few hundred steps, the slide's sub-steps taken); "auto"
     # takes 0.05 with rate and state (test_scenario), where few contacts need sub-steps.
@@ -210,25 +223,32 @@ def two_squares(gap: float = 1e-3, v_left: float = 0.7, v_right: float = -0.3):
 
 
 @pytest.mark.parametrize(
-    ("law", "water", "integrator"),
+    ("law", "water", "integrator", "sides"),
     [
-        ("coulomb", False, "euler"),
-        ("rate-state", True, "euler"),
-        ("coulomb", False, "analytic"),
-        ("rate-state", True, "analytic"),
-        ("rate-state", True, "coupled"),
-        ("coulomb", False, "midstep"),
-        ("rate-state", True, "midstep"),
+        ("coulomb", False, "euler", 0),
+        ("rate-state", True, "euler", 0),
+        ("coulomb", False, "analytic", 0),
+        ("rate-state", True, "analytic", 0),
+        ("rate-state", True, "coupled", 0),
+        ("coulomb", False, "midstep", 0),
+        ("rate-state", True, "midstep", 0),
+        # Outlines of more than contact.SHARED_CLIP_VERTS vertices: the midstep kernel
+        # clips both poses by one call, in a loop.
+        ("coulomb", False, "midstep", 8),
     ],
 )
-def test_world_matches_numpy_reference_step(f64, law, water, integrator):
+def test_world_matches_numpy_reference_step(f64, law, water, integrator, sides):
     """Every body of six random 2-5 block worlds follows the plain NumPy step for 100 steps,
     with every integrator (the analytic and coupled ones at 4 times the step: each contact's
     onset, stick, slip and end solved over fewer steps)."""
     scenes = [
-        scene_from_dict(cluster_scene_dict(seed, 2 + seed % 4, law=law, water=water))
+        scene_from_dict(cluster_scene_dict(seed, 2 + seed % 4, law, water, sides=sides))
         for seed in range(6)
     ]
+    if sides:
+        from taichi_ice.engine.contact import SHARED_CLIP_VERTS
+
+        assert max(len(b.vertices) for s in scenes for b in s.bodies) > SHARED_CLIP_VERTS
     dt = min(s.dt for s in scenes) * (1.0 if integrator == "euler" else 4.0)
     world = World(scenes, dt=dt, integrator=integrator)
     # The twin reads the arrays the World uploaded: a parameter is derived once for both.

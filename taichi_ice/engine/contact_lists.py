@@ -5,7 +5,7 @@ body's shape into place (``outline``, ``normals``), decide which body of a pair 
 (``wants``: the ownership rules told in ``contact``), cheaply reject pairs that cannot touch
 (``near``, ``beyond_a_face``, ``gap_bound``), and rebuild each body's neighbour list from the
 spatial hash (the kernel ``build_lists``); and the small pieces of a pair's contact the
-stage's ``pair`` calls (``relative`` velocities, ``midstep_overlap``, the gathers
+stage's ``pair`` calls (``relative`` velocities, ``midstep_outlines``, the gathers
 ``add_force`` and ``add_shift``, ``remember``: a body's contact memory copied out of its
 slots); and ``settle`` (the kernel ``settle_all``), which books the analytic steps'
 contact work again once the bodies have moved. The forces of the pairs found, and the
@@ -20,7 +20,7 @@ import taichi as ti
 from .. import backend
 from ..codes import BodyEnergy, BodyKind, Status
 from ..physics.contact_law_ti import perp
-from ..physics.polygon_ti import overlap_normals_ti, rotation_ti
+from ..physics.polygon_ti import rotation_ti
 from .broadphase import bucket_of
 from .gather import gather
 from .stages import Access, Stage
@@ -119,11 +119,12 @@ class ContactLists(Stage):
         return (vel[j] + perp(omega[j], r_j)) - (vel[i] + perp(omega[i], r_i))
 
     @ti.func
-    def midstep_overlap(self, i, j, origin, h):
+    def midstep_outlines(self, i, j, origin, h):
         """Bodies i and j at the configuration predicted for mid-step, each in free flight
-        for h/2 (``midstep`` integrator): their overlap's area, point, normal and width
-        relative to ``origin`` (the owner's position at the step's start), and where their
-        centroids are then; the ``mid`` of ``reference_contact.contact_force``."""
+        for h/2 (``midstep`` integrator): their outlines and edge normals, relative to
+        ``origin`` (the owner's position at the step's start), and where their centroids
+        are then; their overlap (``ContactStage.pair``) is the ``mid`` of
+        ``reference_contact.contact_force``."""
         m, d = ti.static((self.model, self.data))
         zero = ti.Vector([0.0, 0.0], self.layout.real)
         c_i = ti.cast(d.body_pos[i] + 0.5 * h * d.body_vel[i] - origin, self.layout.real)
@@ -134,9 +135,7 @@ class ContactLists(Stage):
         p_normals = self.turned_by(i, m.vert_normal_local, zero, False, rot_i[0], rot_i[1])
         q = self.turned_by(j, m.vert_local, c_j, True, rot_j[0], rot_j[1])
         q_normals = self.turned_by(j, m.vert_normal_local, zero, False, rot_j[0], rot_j[1])
-        n_p, n_q = m.body_vert_count[i], m.body_vert_count[j]
-        area, point, normal, width, _kind = overlap_normals_ti(p, p_normals, n_p, q, q_normals, n_q)
-        return area, point, normal, width, c_i, c_j
+        return p, p_normals, q, q_normals, c_i, c_j
 
     @ti.func
     def rotation(self, angle):

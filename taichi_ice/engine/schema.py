@@ -426,7 +426,7 @@ class Layout:
     @property
     def midstep(self) -> bool:
         """The coupled step with each contact linearised about the configuration predicted
-        for mid-step (``integrator = "midstep"``; ``ContactLists.midstep_overlap``)."""
+        for mid-step (``integrator = "midstep"``; ``ContactLists.midstep_outlines``)."""
         return self.integrator == "midstep"
 
     @property

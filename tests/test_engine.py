@@ -232,7 +232,7 @@ def two_squares(gap: float = 1e-3, v_left: float = 0.7, v_right: float = -0.3):
         ("rate-state", True, "coupled", 0),
         ("coulomb", False, "midstep", 0),
         ("rate-state", True, "midstep", 0),
-        # Outlines of more than contact.SHARED_CLIP_VERTS vertices: the midstep kernel
+        # Outlines of more than contact_lists.SHARED_CLIP_VERTS vertices: the midstep kernel
         # clips both poses by one call, in a loop.
         ("coulomb", False, "midstep", 8),
     ],
@@ -246,7 +246,7 @@ def test_world_matches_numpy_reference_step(f64, law, water, integrator, sides):
         for seed in range(6)
     ]
     if sides:
-        from taichi_ice.engine.contact import SHARED_CLIP_VERTS
+        from taichi_ice.engine.contact_lists import SHARED_CLIP_VERTS
 
         assert max(len(b.vertices) for s in scenes for b in s.bodies) > SHARED_CLIP_VERTS
     dt = min(s.dt for s in scenes) * (1.0 if integrator == "euler" else 4.0)

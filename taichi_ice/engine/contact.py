@@ -67,18 +67,13 @@ from ..physics.contact_law_ti import (
     tangential_force_ti,
 )
 from ..physics.contact_step_ti import pair_impulses_ti, sliding_impedance_ti, stick_or_slide_ti
-from ..physics.polygon_ti import facing_gap_ti, overlap_normals_ti
+from ..physics.polygon_ti import facing_gap_ti
 from ..physics.slip import NEW_CONTACT, NEWTON_TOLERANCE
 from ..physics.slip_ti import contact_friction_ti, sliding_steps_ti
 from .contact_lists import SETTLE_ACCESS, ContactLists
 from .schema import Layout, contact_columns, law_columns
 from .stages import Access
 from .state import Data, Model
-
-# The midstep step clips a touching pair twice, at the step's start and at mid-step. For
-# outlines of up to this many vertices (``Layout.max_verts``) the kernel inlines the clip
-# twice; for larger ones it calls it once, in a loop over the two poses (``pair``).
-SHARED_CLIP_VERTS = 4
 
 
 @ti.data_oriented
@@ -254,43 +249,10 @@ class ContactStage(ContactLists):
         if gap < 0.0:
             gap = facing_gap_ti(q, q_normals, n_q, p, n_p, -toward)
         separated = gap >= 0.0
-        area = 0.0
-        point, normal = ti.math.vec2(0.0, 0.0), ti.math.vec2(0.0, 0.0)
-        width = 0.0
-        # The midstep step's overlap at the pose predicted for mid-step, if they overlap now.
-        a_m, w_m = 0.0, 0.0
-        p_m, n_m = ti.math.vec2(0.0, 0.0), ti.math.vec2(0.0, 0.0)
-        c_i = ti.Vector([0.0, 0.0], self.layout.real)
-        c_j = ti.Vector([0.0, 0.0], self.layout.real)
-        if ti.static(not self.layout.midstep or self.maxv <= SHARED_CLIP_VERTS):
-            if not separated:
-                area, point, normal, width, _ = overlap_normals_ti(
-                    p, p_normals, n_p, q, q_normals, n_q
-                )
-            if ti.static(self.layout.midstep):
-                if area > 0.0:
-                    pm, pm_normals, qm, qm_normals, c_i, c_j = self.midstep_outlines(i, j, xi_, dt)
-                    a_m, p_m, n_m, w_m, _ = overlap_normals_ti(
-                        pm, pm_normals, n_p, qm, qm_normals, n_q
-                    )
-        else:
-            # Both poses through one call of the clip, in a loop: inlined twice, the clip of
-            # large outlines made the midstep kernels' compile 2.4x the coupled ones' (a
-            # field of 16-gons: 71 s against 30 s from an empty cache on 2 cores; 41 s so).
-            # Not for 4-gons, whose clip compiles fast and whose jam steps 6 % slower so.
-            pp, pp_normals, qq, qq_normals = p, p_normals, q, q_normals
-            for k in range(0 if separated else 2):
-                at_mid = k == 1
-                if at_mid and area > 0.0:
-                    pp, pp_normals, qq, qq_normals, c_i, c_j = self.midstep_outlines(i, j, xi_, dt)
-                if not at_mid or area > 0.0:
-                    a_k, p_k, n_k, w_k, _ = overlap_normals_ti(
-                        pp, pp_normals, n_p, qq, qq_normals, n_q
-                    )
-                    if at_mid:
-                        a_m, p_m, n_m, w_m = a_k, p_k, n_k, w_k
-                    else:
-                        area, point, normal, width = a_k, p_k, n_k, w_k
+        # With the midstep step, the overlap at the pose predicted for mid-step too.
+        area, point, normal, width, a_m, p_m, n_m, w_m, c_i, c_j = self.step_overlaps(
+            i, j, p, p_normals, n_p, q, q_normals, n_q, separated, xi_, dt
+        )
         if area > 0.0:
             # The world's contact law (model data: worlds of a batch may differ in it).
             w = m.body_world[i]

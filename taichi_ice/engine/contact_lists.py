@@ -165,8 +165,9 @@ class ContactLists(Stage):
         else:
             # Both poses through one call of the clip, in a loop: inlined twice, the clip of
             # large outlines made the midstep kernels' compile 2.4x the coupled ones' (a
-            # field of 16-gons: 71 s against 30 s from an empty cache on 2 cores; 41 s so).
-            # Not for 4-gons, whose clip compiles fast and whose jam steps 6 % slower so.
+            # field of 16-gons: 71 s against 30 s from an empty cache on 2 cores; 41 s this
+            # way). Not for 4-gons: their clip compiles fast, and this way the pillar's jam
+            # stepped 6 % slower.
             pp, pp_normals, qq, qq_normals = p, p_normals, q, q_normals
             for k in range(0 if separated else 2):
                 at_mid = k == 1
@@ -189,7 +190,7 @@ class ContactLists(Stage):
         """Bodies i and j at the configuration predicted for mid-step, each in free flight
         for h/2 (``midstep`` integrator): their outlines and edge normals, relative to
         ``origin`` (the owner's position at the step's start), and where their centroids
-        are then; their overlap (``ContactStage.pair``) is the ``mid`` of
+        are then; their overlap (``step_overlaps``) is the ``mid`` of
         ``reference_contact.contact_force``."""
         m, d = ti.static((self.model, self.data))
         zero = ti.Vector([0.0, 0.0], self.layout.real)

@@ -167,13 +167,23 @@ def spring_dashpot_ti(x, u, h, k, c, inv_m, a, clamp: ti.template(), tau):
     v0 = 0.0 * x
     xs = x
     us = u
-    if tau > 0.0:
-        xo, uo, x_end0 = oscillator_step_ti(0.0 * x, u - a * tau, tau, k, c, inv_m, a, clamp)
-        p0 = (u - uo) * m
-        q0 = (x - xo) * m
-        v0 = c * x_end0
-        xs, us = xo, uo
-    x1, u1, x_end = oscillator_step_ti(xs, us, h, k, c, inv_m, a, clamp)
+    x1, u1, x_end = x, u, x
+    # The stretch since onset (stage 0, if tau > 0) and the step (stage 1) through one call
+    # of the oscillator, in a loop: inlined twice, its solution, clamp and root search made
+    # the analytic, coupled and midstep kernels compile ~1-2 s longer each (the same
+    # operations in the same order either way).
+    for stage in range(0 if tau > 0.0 else 1, 2):
+        x_in, u_in, span = xs, us, h
+        if stage == 0:
+            x_in, u_in, span = 0.0 * x, u - a * tau, tau
+        xo, uo, x_e = oscillator_step_ti(x_in, u_in, span, k, c, inv_m, a, clamp)
+        if stage == 0:
+            p0 = (u - uo) * m
+            q0 = (x - xo) * m
+            v0 = c * x_e
+            xs, us = xo, uo
+        else:
+            x1, u1, x_end = xo, uo, x_e
     p = (us + a * h - u1) * m
     q = (xs + us * h + 0.5 * a * h * h - x1) * m
     return p0 + p, q0 + h * p0 + q, v0 + c * (x_end - xs), x1, u1

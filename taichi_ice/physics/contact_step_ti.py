@@ -93,69 +93,90 @@ def _at(kind, sigma, freq, p, q, t):
 
 @ti.func
 def oscillator_step_ti(x0, u0, h, k, c, inv_m, a, clamp: ti.template()):
-    """Twin of :func:`contact_step.oscillator_step`: ``(x1, u1, x_end)``."""
+    """Twin of :func:`contact_step.oscillator_step`: ``(x1, u1, x_end)``.
+
+    Where ``clamp``, every look at the solution (at ``h``, at the quarter periods, at the
+    root search's guesses and at the root) is one call of ``_at`` in one loop, ``phase``
+    saying which: a kernel inlines a function once per call, and ``_at`` (an exponential
+    and a cosine and sine, fdlibm's in float64) was called at four places. The same values
+    in the same order as the twin's.
+    """
     f0 = k * x0 + c * u0
     x1 = x0 + u0 * h + 0.5 * a * h * h
     u1 = u0 + a * h
     x_end = x0
-    if not (clamp and f0 < 0.0):
+    if ti.static(not clamp):
         shift = a / (inv_m * k)
         kind, sigma, freq, p, q = _solution(x0 - shift, u0, k, c, inv_m)
         xh, uh = _at(kind, sigma, freq, p, q, h)
         xh += shift
         x1, u1, x_end = xh, uh, xh
-        if ti.static(clamp):
-            looks = 1
-            if kind == 0:
-                looks = ti.min(ti.cast(freq * h / QUARTER_TURN, ti.i32) + 1, MAX_LOOKS)
-            lo = 0.0 * h
-            f_lo = f0
-            hi = h
-            f_hi = k * xh + c * uh
-            for i in range(1, looks):
-                t = h * i / looks
-                x, v = _at(kind, sigma, freq, p, q, t)
-                f = k * (x + shift) + c * v
+    elif not f0 < 0.0:  # pushing (as the twin: a NaN goes on)
+        shift = a / (inv_m * k)
+        kind, sigma, freq, p, q = _solution(x0 - shift, u0, k, c, inv_m)
+        looks = 1
+        if kind == 0:
+            looks = ti.min(ti.cast(freq * h / QUARTER_TURN, ti.i32) + 1, MAX_LOOKS)
+        lo = 0.0 * h
+        f_lo = f0
+        hi = h
+        f_hi = f0
+        look = 1
+        searched = 0
+        # 0: at h; 1: the looks (a force that oscillates, every quarter period: it cannot
+        # turn twice between two); 2: the search for the moment the force ends, between lo
+        # (pushing) and hi (pulling); 3: at that moment, then free flight to h; 4: done.
+        phase = 0
+        t = h
+        for _ in range(MAX_LOOKS + END_ITERATIONS + 1):
+            x, v = _at(kind, sigma, freq, p, q, t)
+            f = k * (x + shift) + c * v
+            if phase == 0:
+                x1, u1, x_end = x + shift, v, x + shift
+                f_hi = f
+                phase = 1
+            elif phase == 1:
                 if f < 0.0:
                     hi = t
                     f_hi = f
-                    break
-                lo = t
-                f_lo = f
-            if f_hi < 0.0:
-                x1, u1, x_end = _end(
-                    kind, sigma, freq, p, q, h, k, c, inv_m, a, shift, lo, f_lo, hi, f_hi
-                )
+                    look = looks
+                else:
+                    lo = t
+                    f_lo = f
+                    look += 1
+            elif phase == 2:
+                if f > 0.0:
+                    lo = t
+                else:
+                    hi = t
+                slope = k * v + c * (a - inv_m * f)  # f' along the solution
+                nxt = 0.5 * (lo + hi)
+                if slope < 0.0:
+                    nxt = t - f / slope
+                t = nxt
+                if not (lo < nxt < hi):
+                    t = 0.5 * (lo + hi)
+                searched += 1
+                if hi - lo <= 4.0 * EPS64 * h or searched == END_ITERATIONS:
+                    phase = 3
+                    t = lo
+            else:
+                x_end = x + shift
+                rest = h - lo
+                x1 = x_end + v * rest + 0.5 * a * rest * rest
+                u1 = v + a * rest
+                phase = 4
+            if phase == 1:
+                if look < looks:
+                    t = h * look / looks
+                elif f_hi < 0.0:
+                    phase = 2
+                    t = lo + (hi - lo) * f_lo / (f_lo - f_hi)  # the secant's zero
+                else:
+                    phase = 4
+            if phase == 4:
+                break
     return x1, u1, x_end
-
-
-@ti.func
-def _end(kind, sigma, freq, p, q, h, k, c, inv_m, a, shift, lo_in, f_lo, hi_in, f_hi):
-    """The force reaches zero between ``lo`` (positive) and ``hi`` (negative): when, and the
-    state at ``h`` after flying from there (``contact_step.oscillator_step``'s end)."""
-    lo = lo_in
-    hi = hi_in
-    t = lo + (hi - lo) * f_lo / (f_lo - f_hi)
-    for _ in range(END_ITERATIONS):
-        x, v = _at(kind, sigma, freq, p, q, t)
-        f = k * (x + shift) + c * v
-        if f > 0.0:
-            lo = t
-        else:
-            hi = t
-        slope = k * v + c * (a - inv_m * f)
-        nxt = 0.5 * (lo + hi)
-        if slope < 0.0:
-            nxt = t - f / slope
-        t = nxt
-        if not (lo < nxt < hi):
-            t = 0.5 * (lo + hi)
-        if hi - lo <= 4.0 * EPS64 * h:
-            break
-    x, v = _at(kind, sigma, freq, p, q, lo)
-    x_end = x + shift
-    rest = h - lo
-    return x_end + v * rest + 0.5 * a * rest * rest, v + a * rest, x_end
 
 
 @ti.func

@@ -1,5 +1,6 @@
 """What a step of the jammed pillar costs, and a 20 s pillar run's stepping, for one engine or
-several side by side (the paper's scene, one world, a thread, Euler, float64).
+several side by side (the paper's scene, one world, a thread, float64; the law's default
+integrator, or ``--integrator``).
 
     python benchmarks/jam_step.py --out out/jam_step
     git worktree add /tmp/before <rev>
@@ -34,7 +35,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def worker(
-    law_text: str, at: float, steps: int, windows: int, state_file: str = "", until: float = 20.0
+    law_text: str,
+    at: float,
+    steps: int,
+    windows: int,
+    state_file: str = "",
+    until: float = 20.0,
+    integrator: str | None = None,
 ) -> dict:
     import hashlib
 
@@ -45,7 +52,8 @@ def worker(
 
     backend.init("cpu", "f64")
     law = parse_law(law_text)
-    sim = Simulation([load_scenario("pillar")], friction=law, arch="cpu", precision="f64")
+    kw = {"arch": "cpu", "precision": "f64", "integrator": integrator}
+    sim = Simulation([load_scenario("pillar")], friction=law, **kw)
     world = sim.world
     if state_file and Path(state_file).is_file():  # the first tree's jam (--same-state)
         sim.run(until=sim.dt)  # compiled (or loaded)
@@ -70,7 +78,7 @@ def worker(
         per_step.append((time.perf_counter() - start) / steps)
     contacts = int(world.contact_counts().sum())
 
-    run = Simulation([load_scenario("pillar")], friction=law, arch="cpu", precision="f64")
+    run = Simulation([load_scenario("pillar")], friction=law, **kw)
     run.run(until=run.dt)  # compiled (or loaded) and stepped once
     start = time.perf_counter()
     run.run(until=until)
@@ -112,6 +120,11 @@ def main(argv=None) -> int:
     ap.add_argument("--until", type=float, default=20.0, help="the whole run's end (s)")
     ap.add_argument("--windows", type=int, default=9, help="timed windows from that state")
     ap.add_argument(
+        "--integrator",
+        choices=["euler", "analytic", "coupled", "midstep"],
+        help="the step (default: the law's; Simulation's integrator)",
+    )
+    ap.add_argument(
         "--same-state",
         action="store_true",
         help="step every tree from the first tree's jam (saved in --out), not its own: for "
@@ -121,7 +134,15 @@ def main(argv=None) -> int:
     ap.add_argument("--state-file", default="", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
-        row = worker(args.worker, args.at, args.steps, args.windows, args.state_file, args.until)
+        row = worker(
+            args.worker,
+            args.at,
+            args.steps,
+            args.windows,
+            args.state_file,
+            args.until,
+            args.integrator,
+        )
         print(json.dumps(row))
         return 0
 
@@ -141,6 +162,8 @@ def main(argv=None) -> int:
                 cmd = [sys.executable, __file__, "--at", str(args.at), "--steps", str(args.steps)]
                 cmd += ["--windows", str(args.windows), "--until", str(args.until)]
                 cmd += ["--worker", law]
+                if args.integrator:
+                    cmd += ["--integrator", args.integrator]
                 if args.same_state:
                     name = "state-" + "".join(c if c.isalnum() else "_" for c in law) + ".npz"
                     cmd += ["--state-file", str((args.out / name).resolve())]
@@ -162,7 +185,7 @@ def main(argv=None) -> int:
         json.dumps(
             {"machine": platform.platform(), "cpus": os.cpu_count(), "at": args.at,
              "steps": args.steps, "windows": args.windows, "until": args.until,
-             "same_state": args.same_state,
+             "same_state": args.same_state, "integrator": args.integrator,
              "runs": runs},
             indent=1,
         )

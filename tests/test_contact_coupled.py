@@ -1,5 +1,5 @@
 """A contact's normal and tangent solved together over a step (the ``coupled`` integrator,
-taichi_ice/physics/contact_coupled.py, issue 30): its 4 x 4 exponential against SciPy's, the
+taichi_ice/physics/contact_coupled.py, issue 30): its exponential against SciPy's, the
 joint solution's impulses against an ODE of the two coupled spring-dashpots solved by SciPy,
 the pair's energy kept without dashpots, the two 1D solves of ``pair_impulses`` where nothing
 couples them; and the Taichi twins against the NumPy ones on seeded random contacts."""
@@ -14,7 +14,7 @@ import taichi as ti
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from taichi_ice.physics.contact_coupled import coupled_flow, coupled_impulses, expm4
+from taichi_ice.physics.contact_coupled import coupled_flow, coupled_impulses, flow_times
 from taichi_ice.physics.contact_coupled_ti import coupled_impulses_ti
 from taichi_ice.physics.contact_step import pair_impulses
 
@@ -54,14 +54,32 @@ def random_contact(rng, *, fresh=False, pushing=True):
     )
 
 
-def test_expm4_is_scipys_exponential():
-    """Pade [6/6] with scaling and squaring against SciPy's ``expm``, from norms below the
-    scaling's threshold (no squaring) to 2^6 of it."""
+def test_flow_times_is_scipys_exponential_times_the_state():
+    """``exp(B) z`` by the Taylor series in pieces against SciPy's ``expm`` (Pade, scaling and
+    squaring) times ``z``, for matrices of the flow's block form ``[[0, a I], [P, Q]]``: random
+    ones from norms far below a piece's to ~15 pieces, and the flow's own (``W`` positive
+    definite, springs and dashpots positive, steps to 3 radians of its fastest frequency)."""
     for _ in range(300):
-        b = RNG.normal(size=(4, 4)) * RNG.uniform(0.01, 8.0)
-        want = expm(b)
-        got = np.array(expm4(b))
-        assert np.max(np.abs(got - want)) <= 1e-11 * np.max(np.abs(want))
+        scale = RNG.uniform(0.01, 8.0)
+        a = RNG.uniform(0.1, 1.0) * scale
+        p, q = RNG.normal(size=(2, 2)) * scale, RNG.normal(size=(2, 2)) * scale
+        b = np.block([[np.zeros((2, 2)), a * np.eye(2)], [p, q]])
+        z = RNG.normal(size=4)
+        e = expm(b)
+        got = np.array(flow_times(a, *p.ravel(), *q.ravel(), z))
+        assert np.max(np.abs(got - e @ z)) <= 1e-11 * np.max(np.abs(e)) * np.max(np.abs(z))
+    for _ in range(300):
+        root = RNG.normal(size=(2, 2))
+        w = root @ root.T + 0.1 * np.eye(2)
+        s, c = np.diag(RNG.uniform(0.1, 1.0, 2)), np.diag(RNG.uniform(0.0, 0.5, 2))
+        omega = math.sqrt(max(w[0, 0] * s[0, 0], w[1, 1] * s[1, 1]))
+        h = RNG.uniform(0.01, 3.0) / omega
+        p, q = -w @ s * h / omega, -w @ c * h
+        b = np.block([[np.zeros((2, 2)), omega * h * np.eye(2)], [p, q]])
+        z = RNG.normal(size=4)
+        want = expm(b) @ z
+        got = np.array(flow_times(omega * h, *p.ravel(), *q.ravel(), z))
+        assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want))
 
 
 def test_stuck_contact_impulses_match_the_coupled_ode():

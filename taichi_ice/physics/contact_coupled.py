@@ -14,8 +14,8 @@ one linear system over the step: ``x = (depth, stretch)``, ``u = x' = (approach,
 ``S = diag(k_n, k_t)``, ``C = diag(c_n, c_t)``, ``S x + C u`` the normal force and the stuck
 tangential force against the stretch, ``a`` the other forces' acceleration of the two (the
 last step's change less all this contact's own, its cross term too). About its equilibrium
-``x_eq = S^-1 W^-1 a`` it is ``z' = A z``, solved by the exponential of ``A h``
-(:func:`expm4`: Pade [6/6], scaling and squaring, in balanced units). The bodies take the
+``x_eq = S^-1 W^-1 a`` it is ``z' = A z``, solved by the exponential of ``A h`` times ``z``
+(:func:`flow_times`: its Taylor series in pieces, in balanced units). The bodies take the
 impulse ``P = W^-1 (u0 + a h - u(h))`` and the position impulse ``Q = W^-1 (x0 + u0 h + a
 h^2 / 2 - x(h))``, as in ``contact_step.spring_dashpot``; a contact that began inside the
 last step is integrated from its onset. Sliding (the stuck impulse beyond ``mu`` times the
@@ -34,78 +34,69 @@ import math
 
 from .contact_step import onset, spring_dashpot
 
-__all__ = ["MAX_SQUARINGS", "PADE", "SCALED_NORM", "coupled_flow", "coupled_impulses", "expm4"]
+__all__ = [
+    "MAX_PIECES",
+    "MAX_TERMS",
+    "PIECE_NORM",
+    "SERIES_TOL",
+    "coupled_flow",
+    "coupled_impulses",
+    "flow_times",
+]
 
-# Pade [6/6] of exp: c_k = (12 - k)! 6! / (12! k! (6 - k)!); its error at a norm of 1/2 is
-# ~1e-17, below float64's round-off, so the matrix is halved until its norm is at most that.
-PADE = (1.0, 0.5, 5.0 / 44.0, 1.0 / 66.0, 1.0 / 792.0, 1.0 / 15840.0, 1.0 / 665280.0)
-SCALED_NORM = 0.5
-MAX_SQUARINGS = 30  # a norm of 2^29: no step a scene takes comes near
-
-
-def _mul(a, b):
-    """4 x 4 product, summed in index order (as the Taichi twin)."""
-    return [[sum(a[i][k] * b[k][j] for k in range(4)) for j in range(4)] for i in range(4)]
-
-
-def _solve(m, r):
-    """``m^-1 r`` (4 x 4) by Gaussian elimination without pivoting: ``m = V - U`` of the
-    Pade approximant at a norm <= 1/2 is ``I - x / 2 + ...``, within 0.3 of the identity
-    row by row, so it is diagonally dominant and stays so through the elimination, whose
-    pivots keep away from zero."""
-    m = [row[:] for row in m]
-    r = [row[:] for row in r]
-    for k in range(4):
-        for i in range(k + 1, 4):
-            f = m[i][k] / m[k][k]
-            for j in range(k, 4):
-                m[i][j] -= f * m[k][j]
-            for j in range(4):
-                r[i][j] -= f * r[k][j]
-    out = [[0.0] * 4 for _ in range(4)]
-    for i in range(3, -1, -1):
-        for j in range(4):
-            s = r[i][j]
-            for k in range(i + 1, 4):
-                s -= m[i][k] * out[k][j]
-            out[i][j] = s / m[i][i]
-    return out
+# exp(B) z by its Taylor series, B cut into pieces of infinity norm at most PIECE_NORM: the
+# terms of a piece fall below its sum's round-off by the 23rd (2^24 / 24! ~ 3e-17), and its
+# largest term is at most twice |z|, so little is lost to cancellation.
+PIECE_NORM = 2.0
+MAX_TERMS = 30
+# A norm of 131072, a step some 65,000 times the stability limit: no step a scene comes near
+# (about 1 at the default); past it one piece, whose overflow the runaway check stops.
+MAX_PIECES = 1 << 16
+SERIES_TOL = 2.0**-53  # a term this small against the sum, with the term before it: done
 
 
-def expm4(b):
-    """``exp(b)`` of a 4 x 4 matrix (nested lists or an array): Pade [6/6] of ``b / 2^s``,
-    ``s`` the fewest halvings that bring its infinity norm to ``SCALED_NORM``, then squared
-    ``s`` times. Returns nested lists."""
-    norm = max(sum(abs(float(b[i][j])) for j in range(4)) for i in range(4))
-    s = 0
-    while norm > SCALED_NORM and s < MAX_SQUARINGS:
-        norm *= 0.5
-        s += 1
-    scale = math.ldexp(1.0, -s)
-    x = [[float(b[i][j]) * scale for j in range(4)] for i in range(4)]
-    x2 = _mul(x, x)
-    x4 = _mul(x2, x2)
-    x6 = _mul(x4, x2)
-    c = PADE
-    odd = [
-        [(c[1] if i == j else 0.0) + c[3] * x2[i][j] + c[5] * x4[i][j] for j in range(4)]
-        for i in range(4)
-    ]
-    u = _mul(x, odd)
-    v = [
-        [
-            (c[0] if i == j else 0.0) + c[2] * x2[i][j] + c[4] * x4[i][j] + c[6] * x6[i][j]
-            for j in range(4)
-        ]
-        for i in range(4)
-    ]
-    e = _solve(
-        [[v[i][j] - u[i][j] for j in range(4)] for i in range(4)],
-        [[v[i][j] + u[i][j] for j in range(4)] for i in range(4)],
+def _times(a, p00, p01, p10, p11, q00, q01, q10, q11, v0, v1, v2, v3):
+    """``B v`` for ``B = [[0, a I], [P, Q]]``, in the Taichi twin's order."""
+    return (
+        a * v2,
+        a * v3,
+        p00 * v0 + p01 * v1 + q00 * v2 + q01 * v3,
+        p10 * v0 + p11 * v1 + q10 * v2 + q11 * v3,
     )
-    for _ in range(s):
-        e = _mul(e, e)
-    return e
+
+
+def flow_times(a, p00, p01, p10, p11, q00, q01, q10, q11, z):
+    """``exp(B) z`` for the flow's matrix ``B = [[0, a I], [P, Q]]`` (``P = [[p00, p01],
+    [p10, p11]]``, ``Q`` alike; ``z`` four numbers): ``B`` cut into the fewest equal pieces of
+    infinity norm at most ``PIECE_NORM``, each applied by its Taylor series until two terms
+    in a row are below ``SERIES_TOL`` of the sum (the way of Al-Mohy and Higham's
+    ``expm_multiply``, which SciPy has). Only products of ``B`` with a vector, and those of its
+    block form (10 multiplications): the Pade exponential of the whole matrix this replaced
+    took seven 4 x 4 products and a solve, about 3x the work of the ~20 terms a step needs."""
+    norm = max(
+        abs(a),
+        abs(p00) + abs(p01) + abs(q00) + abs(q01),
+        abs(p10) + abs(p11) + abs(q10) + abs(q11),
+    )
+    pieces = 1  # also where the norm is past MAX_PIECES' or not a number: the run has failed
+    if PIECE_NORM < norm <= PIECE_NORM * MAX_PIECES:
+        pieces = int(math.ceil(norm / PIECE_NORM))
+    s = 1.0 / pieces
+    b = (a * s, p00 * s, p01 * s, p10 * s, p11 * s, q00 * s, q01 * s, q10 * s, q11 * s)
+    y = tuple(z)
+    for _ in range(pieces):
+        t = y
+        last = max(abs(t[0]), abs(t[1]), abs(t[2]), abs(t[3]))
+        for k in range(1, MAX_TERMS + 1):
+            r = 1.0 / k
+            t = _times(*b, *t)
+            t = (t[0] * r, t[1] * r, t[2] * r, t[3] * r)
+            y = (y[0] + t[0], y[1] + t[1], y[2] + t[2], y[3] + t[3])
+            size = max(abs(t[0]), abs(t[1]), abs(t[2]), abs(t[3]))
+            if size + last <= SERIES_TOL * max(abs(y[0]), abs(y[1]), abs(y[2]), abs(y[3])):
+                break
+            last = size
+    return y
 
 
 def coupled_flow(x_n, x_t, u_n, u_t, h, k_n, k_t, c_n, c_t, w_nn, w_nt, w_tt, a_n, a_t):
@@ -118,15 +109,19 @@ def coupled_flow(x_n, x_t, u_n, u_t, h, k_n, k_t, c_n, c_t, w_nn, w_nt, w_tt, a_
     e_n = (w_tt * a_n - w_nt * a_t) / det / k_n
     e_t = (w_nn * a_t - w_nt * a_n) / det / k_t
     omega = math.sqrt(max(w_nn * k_n, w_tt * k_t))
-    b = [
-        [0.0, 0.0, omega * h, 0.0],
-        [0.0, 0.0, 0.0, omega * h],
-        [-w_nn * k_n * h / omega, -w_nt * k_t * h / omega, -w_nn * c_n * h, -w_nt * c_t * h],
-        [-w_nt * k_n * h / omega, -w_tt * k_t * h / omega, -w_nt * c_n * h, -w_tt * c_t * h],
-    ]
-    e = expm4(b)
     z = (x_n - e_n, x_t - e_t, u_n / omega, u_t / omega)
-    y = [sum(e[i][j] * z[j] for j in range(4)) for i in range(4)]
+    y = flow_times(
+        omega * h,
+        -w_nn * k_n * h / omega,
+        -w_nt * k_t * h / omega,
+        -w_nt * k_n * h / omega,
+        -w_tt * k_t * h / omega,
+        -w_nn * c_n * h,
+        -w_nt * c_t * h,
+        -w_nt * c_n * h,
+        -w_tt * c_t * h,
+        z,
+    )
     return y[0] + e_n, y[1] + e_t, y[2] * omega, y[3] * omega
 
 

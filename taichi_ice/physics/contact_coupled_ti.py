@@ -2,83 +2,63 @@
 step (the ``coupled`` integrator).
 
 Operation for operation the NumPy functions, in the kernel's precision (``real``, the type of
-the arguments); the 4 x 4 products, the elimination and the sums run in the same index order,
-unrolled. No field access: ``contact.ContactStage.pair`` reads the fields.
+the arguments); the products and sums in the same order. No field access:
+``contact.ContactStage.pair`` reads the fields.
 """
 
 # No "from __future__ import annotations": Taichi reads the annotations of its functions.
 
 import taichi as ti
 
-from .contact_coupled import MAX_SQUARINGS, PADE, SCALED_NORM
+from .contact_coupled import MAX_PIECES, MAX_TERMS, PIECE_NORM, SERIES_TOL
 from .contact_step_ti import onset_ti, spring_dashpot_ti
 
-__all__ = ["coupled_flow_ti", "coupled_impulses_ti", "expm4_ti"]
+__all__ = ["coupled_flow_ti", "coupled_impulses_ti", "flow_times_ti"]
 
 
 @ti.func
-def _mul(a, b):
-    out = a * 0.0
-    for i in ti.static(range(4)):
-        for j in ti.static(range(4)):
-            s = a[i, 0] * b[0, j]
-            for k in ti.static(range(1, 4)):
-                s += a[i, k] * b[k, j]
-            out[i, j] = s
-    return out
+def _times(a, p00, p01, p10, p11, q00, q01, q10, q11, v0, v1, v2, v3):
+    """Twin of ``contact_coupled._times``: ``B v``, ``B = [[0, a I], [P, Q]]``."""
+    return (
+        a * v2,
+        a * v3,
+        p00 * v0 + p01 * v1 + q00 * v2 + q01 * v3,
+        p10 * v0 + p11 * v1 + q10 * v2 + q11 * v3,
+    )
 
 
 @ti.func
-def _solve(m, r):
-    """Twin of ``contact_coupled._solve``: ``m^-1 r``, elimination without pivoting."""
-    mm = m
-    rr = r
-    for k in ti.static(range(4)):
-        for i in ti.static(range(k + 1, 4)):
-            f = mm[i, k] / mm[k, k]
-            for j in ti.static(range(k, 4)):
-                mm[i, j] -= f * mm[k, j]
-            for j in ti.static(range(4)):
-                rr[i, j] -= f * rr[k, j]
-    out = r * 0.0
-    for i in ti.static(range(3, -1, -1)):
-        for j in ti.static(range(4)):
-            s = rr[i, j]
-            for k in ti.static(range(i + 1, 4)):
-                s -= mm[i, k] * out[k, j]
-            out[i, j] = s / mm[i, i]
-    return out
+def _largest(v0, v1, v2, v3):
+    return ti.max(ti.max(ti.max(ti.abs(v0), ti.abs(v1)), ti.abs(v2)), ti.abs(v3))
 
 
 @ti.func
-def expm4_ti(b):
-    """Twin of :func:`contact_coupled.expm4` (``b`` a 4 x 4 ``ti.Matrix``)."""
-    norm = ti.abs(b[0, 0]) * 0.0
-    for i in ti.static(range(4)):
-        row = ti.abs(b[i, 0])
-        for j in ti.static(range(1, 4)):
-            row += ti.abs(b[i, j])
-        norm = ti.max(norm, row)
-    s = 0
-    scale = 1.0 + 0.0 * norm
-    while norm > SCALED_NORM and s < MAX_SQUARINGS:
-        norm *= 0.5
-        scale *= 0.5
-        s += 1
-    x = b * scale
-    x2 = _mul(x, x)
-    x4 = _mul(x2, x2)
-    x6 = _mul(x4, x2)
-    eye = b * 0.0
-    for i in ti.static(range(4)):
-        eye[i, i] = 1.0
-    odd = eye * PADE[1] + x2 * PADE[3] + x4 * PADE[5]
-    u = _mul(x, odd)
-    v = eye * PADE[0] + x2 * PADE[2] + x4 * PADE[4] + x6 * PADE[6]
-    e = _solve(v - u, v + u)
-    for _ in range(s):
-        e = _mul(e, e)
-    return e
+def flow_times_ti(a, p00, p01, p10, p11, q00, q01, q10, q11, z0, z1, z2, z3):
+    """Twin of :func:`contact_coupled.flow_times`: ``exp(B) z``, four numbers."""
+    norm = ti.max(
+        ti.max(ti.abs(a), ti.abs(p00) + ti.abs(p01) + ti.abs(q00) + ti.abs(q01)),
+        ti.abs(p10) + ti.abs(p11) + ti.abs(q10) + ti.abs(q11),
+    )
+    pieces = 1
+    if PIECE_NORM < norm <= PIECE_NORM * MAX_PIECES:
+        pieces = ti.cast(ti.ceil(norm / PIECE_NORM), ti.i32)
+    s = 1.0 / (pieces + 0.0 * a)
+    b0, b1, b2, b3, b4 = a * s, p00 * s, p01 * s, p10 * s, p11 * s
+    b5, b6, b7, b8 = q00 * s, q01 * s, q10 * s, q11 * s
+    y0, y1, y2, y3 = z0, z1, z2, z3
+    for _ in range(pieces):
+        t0, t1, t2, t3 = y0, y1, y2, y3
+        last = _largest(t0, t1, t2, t3)
+        for k in range(1, MAX_TERMS + 1):
+            r = 1.0 / (k + 0.0 * a)
+            t0, t1, t2, t3 = _times(b0, b1, b2, b3, b4, b5, b6, b7, b8, t0, t1, t2, t3)
+            t0, t1, t2, t3 = t0 * r, t1 * r, t2 * r, t3 * r
+            y0, y1, y2, y3 = y0 + t0, y1 + t1, y2 + t2, y3 + t3
+            size = _largest(t0, t1, t2, t3)
+            if size + last <= SERIES_TOL * _largest(y0, y1, y2, y3):
+                break
+            last = size
+    return y0, y1, y2, y3
 
 
 @ti.func
@@ -88,24 +68,22 @@ def coupled_flow_ti(x_n, x_t, u_n, u_t, h, k_n, k_t, c_n, c_t, w_nn, w_nt, w_tt,
     e_n = (w_tt * a_n - w_nt * a_t) / det / k_n
     e_t = (w_nn * a_t - w_nt * a_n) / det / k_t
     omega = ti.sqrt(ti.max(w_nn * k_n, w_tt * k_t))
-    zero = 0.0 * h
-    b = ti.Matrix(
-        [
-            [zero, zero, omega * h, zero],
-            [zero, zero, zero, omega * h],
-            [-w_nn * k_n * h / omega, -w_nt * k_t * h / omega, -w_nn * c_n * h, -w_nt * c_t * h],
-            [-w_nt * k_n * h / omega, -w_tt * k_t * h / omega, -w_nt * c_n * h, -w_tt * c_t * h],
-        ]
+    y0, y1, y2, y3 = flow_times_ti(
+        omega * h,
+        -w_nn * k_n * h / omega,
+        -w_nt * k_t * h / omega,
+        -w_nt * k_n * h / omega,
+        -w_tt * k_t * h / omega,
+        -w_nn * c_n * h,
+        -w_nt * c_t * h,
+        -w_nt * c_n * h,
+        -w_tt * c_t * h,
+        x_n - e_n,
+        x_t - e_t,
+        u_n / omega,
+        u_t / omega,
     )
-    e = expm4_ti(b)
-    z = ti.Vector([x_n - e_n, x_t - e_t, u_n / omega, u_t / omega])
-    y = ti.Vector([zero, zero, zero, zero])
-    for i in ti.static(range(4)):
-        s = e[i, 0] * z[0]
-        for j in ti.static(range(1, 4)):
-            s += e[i, j] * z[j]
-        y[i] = s
-    return y[0] + e_n, y[1] + e_t, y[2] * omega, y[3] * omega
+    return y0 + e_n, y1 + e_t, y2 * omega, y3 * omega
 
 
 @ti.func

@@ -80,7 +80,7 @@ def flow_times(a, p00, p01, p10, p11, q00, q01, q10, q11, z):
     )
     pieces = 1  # also where the norm is past MAX_PIECES' or not a number: the run has failed
     if PIECE_NORM < norm <= PIECE_NORM * MAX_PIECES:
-        pieces = int(math.ceil(norm / PIECE_NORM))
+        pieces = math.ceil(norm / PIECE_NORM)
     s = 1.0 / pieces
     b = (a * s, p00 * s, p01 * s, p10 * s, p11 * s, q00 * s, q01 * s, q10 * s, q11 * s)
     y = tuple(z)

@@ -190,11 +190,11 @@ def main(argv=None) -> int:
             indent=1,
         )
     )  # fmt: skip
-    _chart(runs, args.out / "jam_step.png")
+    _chart(runs, args.out / "jam_step.png", args.integrator)
     return 0
 
 
-def _chart(runs, path: Path) -> None:
+def _chart(runs, path: Path, integrator: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -213,11 +213,15 @@ def _chart(runs, path: Path) -> None:
                 xs = [j + 0.25 * (k - (len(trees) - 1) / 2)] * len(ys)
                 ax.plot(xs, ys, "o", color=f"C{k}", label=git if j == 0 else None)
         ax.set_xticks(range(len(laws)), laws)
+        ax.set_xlim(-0.5, len(laws) - 0.5)
         ax.set_ylabel(label)
-        ax.set_ylim(bottom=0)
+        ax.set_ylim(0, 1.15 * max(r[key] for r in runs))
         ax.grid(alpha=0.3)
     axes[0].legend(title="engine", fontsize=8)
-    fig.suptitle("pillar scene, one world, a thread (each point a fresh process)", fontsize=10)
+    step = f"{integrator} step" if integrator else "the law's default step"
+    fig.suptitle(
+        f"pillar scene, one world, a thread, {step} (each point a fresh process)", fontsize=10
+    )
     fig.savefig(path, dpi=120)
 
 

@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from taichi_ice.physics.contact_coupled import coupled_flow, coupled_impulses, flow_times
-from taichi_ice.physics.contact_coupled_ti import coupled_impulses_ti
+from taichi_ice.physics.contact_coupled_ti import coupled_impulses_ti, flow_times_ti
 from taichi_ice.physics.contact_step import pair_impulses
 
 RNG = np.random.default_rng(20261127)
@@ -227,3 +227,49 @@ def test_the_taichi_twin_equals_numpy_on_random_contacts(kernel):
     else:
         assert off.all(axis=1).mean() >= 0.99
         assert np.all(np.abs(got - want) <= 1e-3 * scale)
+
+
+def test_the_taichi_flow_equals_numpy_over_many_pieces(taichi_runtime):
+    """``flow_times_ti`` against its NumPy twin on seeded random matrices of the flow's block
+    form with norms from far below a piece's (2) to tens of pieces (the contacts above reach two
+    pieces only now and then): the loop over pieces and the series' stop, where a step far
+    past the default one takes them. Float64: within 1e-12 of ``max|exp(B)| max|z|``; a
+    float32 run computes in float32: within 1e-4 of it."""
+    n = 200
+    real = ti.f64 if taichi_runtime[1] == "f64" else ti.f32
+    ins = ti.field(real, shape=(n, 13))
+    outs = ti.field(real, shape=(n, 4))
+
+    @ti.kernel
+    def run():
+        for i in range(n):
+            r = ti.Vector([ins[i, k] for k in ti.static(range(13))])
+            y = flow_times_ti(
+                r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], r[11], r[12]
+            )
+            for k in ti.static(range(4)):
+                outs[i, k] = y[k]
+
+    rng = np.random.default_rng(20261202)
+    scale = np.exp(rng.uniform(np.log(0.01), np.log(30.0), n))
+    rows = np.concatenate(
+        [rng.uniform(0.1, 1.0, (n, 1)), rng.normal(size=(n, 8)), rng.normal(size=(n, 4))], axis=1
+    )
+    rows[:, :9] *= scale[:, None]
+    ins.from_numpy(rows)
+    rows = ins.to_numpy().astype(np.float64)  # as the kernel got them
+    run()
+    got = outs.to_numpy().astype(np.float64)
+    want = np.array([flow_times(*r[:9], r[9:]) for r in rows])
+    size = np.array(
+        [np.max(np.abs(expm(np.block([[np.zeros((2, 2)), r[0] * np.eye(2)],
+                                      [r[1:5].reshape(2, 2), r[5:9].reshape(2, 2)]]))))
+         for r in rows]
+    ) * np.max(np.abs(rows[:, 9:]), axis=1)  # fmt: skip
+    norms = np.max(
+        [rows[:, 0], np.abs(rows[:, [1, 2, 5, 6]]).sum(1), np.abs(rows[:, [3, 4, 7, 8]]).sum(1)],
+        axis=0,
+    )
+    assert np.sum(norms > 2.0) >= n // 3 and norms.max() > 40.0  # the inputs take many pieces
+    tol = {"f64": 1e-12, "f32": 1e-4}[taichi_runtime[1]]
+    assert np.all(np.abs(got - want) <= tol * size[:, None])

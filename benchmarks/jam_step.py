@@ -119,11 +119,12 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=2000, help="steps a timed window")
     ap.add_argument("--until", type=float, default=20.0, help="the whole run's end (s)")
     ap.add_argument("--windows", type=int, default=9, help="timed windows from that state")
-    ap.add_argument(
-        "--integrator",
-        choices=["euler", "analytic", "coupled", "midstep"],
-        help="the step (default: the law's; Simulation's integrator)",
-    )
+    # The names the engine takes. Appended, not put first: a worker must import the package
+    # of the tree it times (its PYTHONPATH), not this checkout's.
+    sys.path.append(str(ROOT))
+    from taichi_ice.physics.timestep import INTEGRATORS
+
+    ap.add_argument("--integrator", choices=INTEGRATORS, help="the step (default: the law's)")
     ap.add_argument(
         "--same-state",
         action="store_true",

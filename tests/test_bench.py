@@ -297,3 +297,47 @@ def test_jam_step_steps_every_tree_from_the_first_trees_jam(tmp_path):
     with np.load(tmp_path / "state-coulomb_0_9.npz") as saved:
         assert 0 < int(saved["_steps"]) < first["run_steps"]  # at 0.05 s of the run's 0.1
     assert (tmp_path / "jam_step.png").is_file()
+
+
+def test_suite_compile_sums_the_compiles_by_file_and_finds_the_repeats():
+    """``benchmarks/suite_compile.py``'s summary of its rows, by hand: one kernel of one
+    layout compiled by both workers (2 s and 3 s: the cheaper, 2 s, was spent twice), another
+    compiled twice in one worker (1 s, then 1.5 s again), one more once (0.5 s)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "suite_compile.py"
+    spec = importlib.util.spec_from_file_location("suite_compile", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def row(worker, test, kernel, layout, front, launch):
+        return {
+            "worker": worker,
+            "test": test,
+            "kernel": kernel,
+            "owner": "WorldStepper",
+            "layout": layout,
+            "front_s": front,
+            "launch_s": launch,
+        }
+
+    rows = [
+        row("gw0", "tests/test_a.py::t1", "run", "L1", 0.5, 1.5),
+        row("gw1", "tests/test_b.py::t2", "run", "L1", 1.0, 2.0),
+        row("gw0", "tests/test_a.py::t3", "run", "L2", 0.25, 0.75),
+        row("gw0", "tests/test_c.py::t4", "run", "L2", 0.5, 1.0),
+        row("gw1", "tests/test_b.py::t5", "advance", "L1", 0.125, 0.375),
+    ]
+    got = module.summarise(rows)
+    assert got["kernels"] == 5
+    assert got["compile_s"] == pytest.approx(2.0 + 3.0 + 1.0 + 1.5 + 0.5)
+    assert got["front_s"] == pytest.approx(0.5 + 1.0 + 0.25 + 0.5 + 0.125)
+    assert got["by_file"] == pytest.approx(
+        {"tests/test_b.py": 3.5, "tests/test_a.py": 3.0, "tests/test_c.py": 1.5}
+    )
+    assert list(got["by_file"]) == ["tests/test_b.py", "tests/test_a.py", "tests/test_c.py"]
+    assert got["by_worker"] == pytest.approx({"gw0": 4.5, "gw1": 3.5})
+    assert got["by_kernel"] == pytest.approx({"WorldStepper.run": 7.5, "WorldStepper.advance": 0.5})
+    assert got["both_workers_s"] == pytest.approx(2.0)
+    assert got["again_in_a_worker_s"] == pytest.approx(1.5)

@@ -443,6 +443,25 @@ def test_the_step_shift_is_held_against_the_sampling_error_in_closed_form():
     assert dem_ensemble.mcnemar([1, 0, 1, 0], [0, 1, 0, 1])["p"] == pytest.approx(1.0)
 
 
+def test_the_ensemble_holds_each_laws_default_step_against_the_quarter_step():
+    """``validate --dem``'s ensemble runs the step a user gets by default for each law
+    (``timestep.default_integrator`` at ``default_safety``: Coulomb's midstep step at 0.6
+    stable_dt, rate and state's Euler step at 0.05) and holds it against the Euler step at
+    0.05 and at 0.2 (issue 30's baseline), each pair of cases compared once."""
+    from taichi_ice.experiments.validation import dem_ensemble
+    from taichi_ice.physics import timestep
+
+    pairs = {frozenset(pair) for pair in dem_ensemble.COMPARISONS}
+    assert len(pairs) == len(dem_ensemble.COMPARISONS)  # no pair twice, in either order
+    for law in dem_ensemble.LAWS:
+        default = (timestep.default_integrator(law), timestep.default_safety(law))
+        assert default in dem_ensemble.CASES
+        for against in (("euler", 0.05), ("euler", 0.2)):
+            if default != against:
+                assert frozenset((default, against)) in pairs, (law, default, against)
+    assert ("midstep", timestep.MIDSTEP_SAFETY) in dem_ensemble.CASES
+
+
 def test_quick_ensemble_runs_and_compares_on_the_same_layouts(tmp_path):
     """``dem_ensemble --quick``: two layouts of the pillar scene at 0.2 and 0.8 stable_dt
     until the rubble has met the pillar; its files, every layout's measures, and the
@@ -487,23 +506,25 @@ def test_the_ensemble_runs_the_cases_and_layouts_asked_for(tmp_path, capsys):
     }
     with pytest.raises(UsageError, match=r"coupled:0\.8 would be compared with no other"):
         dem_ensemble.select(dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("coupled", 0.8)])
-    # A step the study does not list is held against the default's, when that runs too.
+    # A step the study does not list (0.4) is held against the baseline and the reference,
+    # those of them that run too.
+    assert ("midstep", 0.4) not in dem_ensemble.CASES
     _, own = dem_ensemble.select(
-        dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("euler", 0.2), ("midstep", 0.6)]
+        dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("euler", 0.2), ("midstep", 0.4)]
     )
-    assert own == ((("midstep", 0.6), ("euler", 0.2)),)
+    assert own == ((("midstep", 0.4), ("euler", 0.2)),)
     _, both = dem_ensemble.select(
         dem_ensemble.CASES,
         dem_ensemble.COMPARISONS,
-        [("euler", 0.2), ("euler", 0.05), ("midstep", 0.6)],
+        [("euler", 0.2), ("euler", 0.05), ("midstep", 0.4)],
     )
     assert set(both) == {
         (("euler", 0.2), ("euler", 0.05)),
-        (("midstep", 0.6), ("euler", 0.2)),
-        (("midstep", 0.6), ("euler", 0.05)),
+        (("midstep", 0.4), ("euler", 0.2)),
+        (("midstep", 0.4), ("euler", 0.05)),
     }
-    with pytest.raises(UsageError, match=r"midstep:0\.6 would be compared with no other"):
-        dem_ensemble.select(dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("midstep", 0.6)])
+    with pytest.raises(UsageError, match=r"midstep:0\.4 would be compared with no other"):
+        dem_ensemble.select(dem_ensemble.CASES, dem_ensemble.COMPARISONS, [("midstep", 0.4)])
     for argv, said in (
         (["--cases", "coupled:0.8"], "coupled:0.8 would be compared with no other case run"),
         (["--cases", "verlet:0.2,euler:0.2"], "case 'verlet:0.2': write INTEGRATOR:RATIO"),

@@ -16,9 +16,10 @@
   against an ODE, the pushed box's energy budget, the pillar scene against a run at a quarter
   of the step, when chaotic runs part), and the largest step each scene survives
   (``dem_stability``), with the recommended ``dt_safety``; each with both integrators.
-- ``dem_ensemble`` (``--dem``): the pillar scene over 32 layouts at 4x the default step and
-  with the analytic step, against the default on the same layouts: each measure's shift
-  against its sampling error (paired t interval, Wilcoxon, KS; released: McNemar).
+- ``dem_ensemble`` (``--dem``): the pillar scene over 32 layouts at 4x the Euler step's 0.2
+  stable_dt and with the other integrators, against it on the same layouts, and each law's
+  default step against a quarter of it: each measure's shift against its sampling error
+  (paired t interval, Wilcoxon, KS; released: McNemar).
 - ``contact_convergence`` (``--dem``): friction at a DEM contact against dt: a driven
   slider's frictional work and slip starts, a block that slid holding or sliding under a
   pull, steady sliding on a moving floor against mu_ss, every law in the pillar scene before

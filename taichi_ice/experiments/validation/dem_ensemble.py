@@ -7,9 +7,10 @@ what the paper's question rests on is that draw's distribution over layouts. Her
 ``LAYOUTS`` layouts of the pillar scene (the paper's and reseeded ones, as the study's), with
 Coulomb friction (mu = 0.5) and the paper's rate-and-state law, the paper's 20 s at each
 (integrator, dt / stable_dt) of ``CASES``, the measures of ``experiments.metrics``, held
-against each other on the same layouts (``COMPARISONS``: 4x the default step and the
-analytic step against the default, the default against a quarter of its step, and the two
-integrators at that quarter):
+against each other on the same layouts (``COMPARISONS``: 4x the Euler step's 0.2 stable_dt,
+issue 30's baseline, and the analytic steps against it, it against a quarter of its step,
+the two integrators at that quarter, and each law's default step, ``DEFAULTS``, against
+the quarter step and the baseline):
 
 - **the step's shift**: the mean of the paired differences (same layout), with its 95 %
   t interval, relative to the other's mean; the shift is "within the sampling error" where
@@ -39,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from ...physics import timestep
 from ..inference import holm
 from ..inference import mcnemar as _mcnemar_test
 from .dem_charts import INTEGRATOR_COLORS
@@ -46,10 +48,16 @@ from .dem_charts import INTEGRATOR_COLORS
 LAYOUTS = 32
 UNTIL = 20.0  # s: the paper's run
 LAWS = ("coulomb", "rate-state")
-BASELINE = ("euler", 0.2)  # the default integrator at the default step
+# Issue 30's "today's step", every law's default until 2026-12-02: the Euler step at 0.2.
+BASELINE = ("euler", 0.2)
 REFERENCE = ("euler", 0.05)  # a quarter of it
-# (integrator, dt / stable_dt): 4x the default step with each integrator, the analytic and
-# coupled steps at the default one, and Euler and the analytic step at a quarter of it.
+# Each law's default step now (``timestep.default_integrator`` at ``default_safety``):
+# Coulomb's the midstep step at 0.6, rate and state's the Euler step at 0.05 (REFERENCE).
+# Read from the code, so that the study holds whatever step a user gets by default.
+DEFAULTS = {law: (timestep.default_integrator(law), timestep.default_safety(law)) for law in LAWS}
+# (integrator, dt / stable_dt): 4x the baseline step with each integrator, the analytic and
+# coupled steps at the baseline one, Euler and the analytic step at a quarter of it, and
+# each law's default step (``DEFAULTS``) where it is none of those.
 CASES = (
     BASELINE,
     ("euler", 0.8),
@@ -61,7 +69,9 @@ CASES = (
     ("analytic", 0.05),
     ("midstep", 0.8),
 )
-# (case, against): what each comparison holds against what.
+CASES += tuple(sorted({d for d in DEFAULTS.values() if d not in CASES}))
+# (case, against): what each comparison holds against what; a default step against the
+# reference and the baseline.
 COMPARISONS = (
     (("euler", 0.8), BASELINE),
     (("analytic", 0.2), BASELINE),
@@ -72,6 +82,12 @@ COMPARISONS = (
     (BASELINE, REFERENCE),
     (("analytic", 0.05), REFERENCE),
     (("midstep", 0.8), BASELINE),
+)
+COMPARISONS += tuple(
+    (d, against)
+    for d in sorted(set(DEFAULTS.values()))
+    for against in (REFERENCE, BASELINE)
+    if d != against and (d, against) not in COMPARISONS and (against, d) not in COMPARISONS
 )
 MEASURES = ("peak_force", "friction_energy", "concentration")
 ALPHA = 0.05  # family-wise, Holm
@@ -235,7 +251,8 @@ def _shift(c: dict[str, Any]) -> str:
 
 def plot(summary: dict[str, Any], path: Path) -> None:
     """Per law (rows) and measure (columns): each case's mean with its 95 % interval over
-    the layouts, the baseline's mean +- 1.96 standard errors shaded."""
+    the layouts; shaded, the mean +- 1.96 standard errors of the law's default step
+    (``DEFAULTS``), or of ``BASELINE`` where the default was not run."""
     from matplotlib.figure import Figure
 
     laws = summary["settings"]["laws"]
@@ -244,6 +261,10 @@ def plot(summary: dict[str, Any], path: Path) -> None:
     axes = fig.subplots(len(laws), len(columns), squeeze=False)
     for row, law in enumerate(laws):
         runs = [r for r in summary["runs"] if r["law"] == law]
+        run_cases = {(r["integrator"], round(r["nominal"], 6)) for r in runs}
+        shaded = DEFAULTS.get(law, BASELINE)
+        if (shaded[0], round(shaded[1], 6)) not in run_cases:
+            shaded = BASELINE
         for col, m in enumerate(columns):
             ax = axes[row][col]
             for k, r in enumerate(runs):
@@ -252,7 +273,7 @@ def plot(summary: dict[str, Any], path: Path) -> None:
                 color = INTEGRATOR_COLORS.get(r["integrator"], "C7")
                 ax.plot(np.full(v.size, k) + 0.08, v, ".", color=color, alpha=0.3, ms=4)
                 ax.errorbar(k - 0.08, v.mean(), yerr=half, fmt="o", color=color, capsize=3)
-                if (r["integrator"], r["nominal"]) == BASELINE:
+                if (r["integrator"], round(r["nominal"], 6)) == (shaded[0], round(shaded[1], 6)):
                     ax.axhspan(v.mean() - half, v.mean() + half, color="0.85", zorder=0)
             ax.set_xticks(range(len(runs)))
             ax.set_xticklabels(
@@ -269,8 +290,10 @@ def plot(summary: dict[str, Any], path: Path) -> None:
         f"Pillar scene over {summary['settings']['layouts']} layouts, "
         + (f"Coulomb mu = {mu:g}, " if mu else "")
         + f"{summary['settings']['until_s']:g} s: "
-        "each integrator and dt / stable_dt (mean, 95 % interval, layouts as dots); shaded: "
-        "the default's mean +- 1.96 standard errors",
+        "each integrator and dt / stable_dt (mean, 95 % interval, layouts as dots);\nshaded: "
+        "the law's default step's mean +- 1.96 standard errors ("
+        + ", ".join(f"{law} {i} {r:g}" for law, (i, r) in DEFAULTS.items() if law in laws)
+        + "; else euler 0.2)",
         fontsize=10,
     )
     fig.savefig(path, dpi=75)

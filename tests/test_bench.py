@@ -302,7 +302,8 @@ def test_jam_step_steps_every_tree_from_the_first_trees_jam(tmp_path):
 def test_suite_compile_sums_the_compiles_by_file_and_finds_the_repeats():
     """``benchmarks/suite_compile.py``'s summary of its rows, by hand: one kernel of one
     layout compiled by both workers (2 s and 3 s: the cheaper, 2 s, was spent twice), another
-    compiled twice in one worker (1 s, then 1.5 s again), one more once (0.5 s)."""
+    compiled twice in one worker (1 s, then 1.5 s again), one more once (0.5 s), and two of
+    no layout (0.5 s each), which are not told apart."""
     import importlib.util
     from pathlib import Path
 
@@ -328,16 +329,25 @@ def test_suite_compile_sums_the_compiles_by_file_and_finds_the_repeats():
         row("gw0", "tests/test_a.py::t3", "run", "L2", 0.25, 0.75),
         row("gw0", "tests/test_c.py::t4", "run", "L2", 0.5, 1.0),
         row("gw1", "tests/test_b.py::t5", "advance", "L1", 0.125, 0.375),
+        # No layout (Taichi's to_numpy of two fields, say): not told apart, never a repeat.
+        row("gw0", "tests/test_c.py::t6", "tensor_to_ext_arr", "", 0.25, 0.25),
+        row("gw0", "tests/test_c.py::t6", "tensor_to_ext_arr", "", 0.25, 0.25),
     ]
     got = module.summarise(rows)
-    assert got["kernels"] == 5
-    assert got["compile_s"] == pytest.approx(2.0 + 3.0 + 1.0 + 1.5 + 0.5)
-    assert got["front_s"] == pytest.approx(0.5 + 1.0 + 0.25 + 0.5 + 0.125)
+    assert got["kernels"] == 7
+    assert got["compile_s"] == pytest.approx(2.0 + 3.0 + 1.0 + 1.5 + 0.5 + 1.0)
+    assert got["front_s"] == pytest.approx(0.5 + 1.0 + 0.25 + 0.5 + 0.125 + 0.5)
     assert got["by_file"] == pytest.approx(
-        {"tests/test_b.py": 3.5, "tests/test_a.py": 3.0, "tests/test_c.py": 1.5}
+        {"tests/test_b.py": 3.5, "tests/test_a.py": 3.0, "tests/test_c.py": 2.5}
     )
     assert list(got["by_file"]) == ["tests/test_b.py", "tests/test_a.py", "tests/test_c.py"]
-    assert got["by_worker"] == pytest.approx({"gw0": 4.5, "gw1": 3.5})
-    assert got["by_kernel"] == pytest.approx({"WorldStepper.run": 7.5, "WorldStepper.advance": 0.5})
+    assert got["by_worker"] == pytest.approx({"gw0": 5.5, "gw1": 3.5})
+    assert got["by_kernel"] == pytest.approx(
+        {
+            "WorldStepper.run": 7.5,
+            "WorldStepper.tensor_to_ext_arr": 1.0,
+            "WorldStepper.advance": 0.5,
+        }
+    )
     assert got["both_workers_s"] == pytest.approx(2.0)
     assert got["again_in_a_worker_s"] == pytest.approx(1.5)

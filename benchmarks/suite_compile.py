@@ -13,9 +13,10 @@ kernel, the class of the object it belongs to and a hash of that object's ``layo
 engine's stages carry one), the front end's and the first launch's seconds. Processes the
 tests start (the command line's tests) are not counted.
 
-Writes ``suite_compile.json`` (the wall time, pytest's last line, the sums by worker, test
-file and kernel, the kernels compiled by both workers and those compiled more than once in
-one worker) and ``suite_compile.png`` (the compile seconds of each test file, by kernel).
+Writes ``pytest.log`` (pytest's output, as it runs), ``suite_compile.json`` (the wall time,
+pytest's last line, the sums by worker, test file and kernel, the kernels compiled by both
+workers and those compiled more than once in one worker) and ``suite_compile.png`` (the
+compile seconds of the costliest test files).
 """
 
 from __future__ import annotations
@@ -174,11 +175,18 @@ def main(argv=None) -> int:
     command = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider"]
     command += ["-p", "suite_compile", "-n", str(args.jobs), "--dist", "loadfile"]
     command += args.pytest_args or ["tests"]
+    log = out / "pytest.log"
+    print(f"suite_compile: running the suite cold (pytest's output: {log}) ...", flush=True)
     start = time.perf_counter()
-    done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True)
+    with open(log, "w") as f:
+        done = subprocess.run(command, cwd=ROOT, env=env, stdout=f, stderr=subprocess.STDOUT)
     wall = time.perf_counter() - start
-    lines = [ln for ln in done.stdout.splitlines() if ln.strip()]
-    rows = [json.loads(ln) for f in sorted(rows_dir.glob("*.jsonl")) for ln in open(f)]
+    lines = [ln for ln in log.read_text().splitlines() if ln.strip()]
+    rows = [
+        json.loads(ln)
+        for f in sorted(rows_dir.glob("*.jsonl"))
+        for ln in f.read_text().splitlines()
+    ]
     summary = {"wall_s": wall, "pytest": lines[-1] if lines else "", "exit": done.returncode}
     summary.update(summarise(rows))
     (out / "suite_compile.json").write_text(json.dumps(summary, indent=1) + "\n")

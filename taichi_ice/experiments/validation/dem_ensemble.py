@@ -257,23 +257,27 @@ def plot(summary: dict[str, Any], path: Path) -> None:
 
     laws = summary["settings"]["laws"]
     columns = (*MEASURES, "released")
-    fig = Figure(figsize=(3.4 * len(columns), 2.9 * len(laws)), constrained_layout=True)
+    # Wide enough for every case's label (ten cases a law since the defaults joined them).
+    most = max(sum(r["law"] == law for r in summary["runs"]) for law in laws)
+    width = max(3.4, 0.5 * most)
+    fig = Figure(figsize=(width * len(columns), 2.9 * len(laws)), constrained_layout=True)
     axes = fig.subplots(len(laws), len(columns), squeeze=False)
     for row, law in enumerate(laws):
         runs = [r for r in summary["runs"] if r["law"] == law]
-        run_cases = {(r["integrator"], round(r["nominal"], 6)) for r in runs}
-        shaded = DEFAULTS.get(law, BASELINE)
-        if (shaded[0], round(shaded[1], 6)) not in run_cases:
-            shaded = BASELINE
+        cases = [(r["integrator"], round(r["nominal"], 6)) for r in runs]
+        integ, ratio = DEFAULTS.get(law, BASELINE)
+        shaded = (integ, round(ratio, 6))
+        if shaded not in cases:
+            shaded = (BASELINE[0], round(BASELINE[1], 6))
         for col, m in enumerate(columns):
             ax = axes[row][col]
-            for k, r in enumerate(runs):
+            for k, (r, case) in enumerate(zip(runs, cases)):
                 v = np.asarray(r[m], dtype=float)
                 half = 1.96 * v.std(ddof=1) / math.sqrt(v.size) if v.size > 1 else 0.0
                 color = INTEGRATOR_COLORS.get(r["integrator"], "C7")
                 ax.plot(np.full(v.size, k) + 0.08, v, ".", color=color, alpha=0.3, ms=4)
                 ax.errorbar(k - 0.08, v.mean(), yerr=half, fmt="o", color=color, capsize=3)
-                if (r["integrator"], round(r["nominal"], 6)) == (shaded[0], round(shaded[1], 6)):
+                if case == shaded:
                     ax.axhspan(v.mean() - half, v.mean() + half, color="0.85", zorder=0)
             ax.set_xticks(range(len(runs)))
             ax.set_xticklabels(

@@ -7,6 +7,7 @@ couples them; and the Taichi twins against the NumPy ones on seeded random conta
 # No "from __future__ import annotations": Taichi reads kernel annotations as objects.
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -14,7 +15,13 @@ import taichi as ti
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from taichi_ice.physics.contact_coupled import coupled_flow, coupled_impulses, flow_times
+from taichi_ice.physics.contact_coupled import (
+    SERIES_TOL,
+    coupled_flow,
+    coupled_impulses,
+    flow_times,
+    series_terms,
+)
 from taichi_ice.physics.contact_coupled_ti import coupled_impulses_ti, flow_times_ti
 from taichi_ice.physics.contact_step import pair_impulses
 
@@ -80,6 +87,28 @@ def test_flow_times_is_scipys_exponential_times_the_state():
         want = expm(b) @ z
         got = np.array(flow_times(omega * h, *p.ravel(), *q.ravel(), z))
         assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want))
+
+
+def test_the_series_leaves_out_less_than_its_tolerance_and_takes_no_term_more():
+    """``series_terms`` for piece norms ``nu`` from 1e-6 to a piece's full 2: what the Taylor
+    series of ``exp(nu)`` leaves out after that many terms, summed in exact rationals (not the
+    closed bound the code takes), times ``exp(nu)`` (the result is at least ``exp(-nu) |z|``),
+    is at most ``SERIES_TOL``; with one term fewer it is more, at every norm."""
+
+    def left_out(nu: float, m: int) -> float:
+        x, term, total = Fraction(nu), Fraction(1), Fraction(0)
+        for k in range(1, m + 80):
+            term = term * x / k
+            if k > m:
+                total += term
+        return float(total) * math.exp(nu)
+
+    norms = np.concatenate([np.geomspace(1e-6, 2.0, 200), [2.0]])
+    terms = [series_terms(nu) for nu in norms]
+    assert terms[-1] == 24 and terms[0] == 2
+    assert all(left_out(nu, m) <= SERIES_TOL for nu, m in zip(norms, terms))
+    assert all(left_out(nu, m - 1) > SERIES_TOL for nu, m in zip(norms, terms))
+    assert series_terms(float("nan")) == 1
 
 
 def test_stuck_contact_impulses_match_the_coupled_ode():

@@ -38,21 +38,57 @@ __all__ = [
     "MAX_PIECES",
     "MAX_TERMS",
     "PIECE_NORM",
+    "REACH",
     "SERIES_TOL",
     "coupled_flow",
     "coupled_impulses",
     "flow_times",
+    "series_terms",
 ]
 
 # exp(B) z by its Taylor series, B cut into pieces of infinity norm at most PIECE_NORM: at a
-# piece's full norm its terms fall below 2^-53 of the state by the 23rd (2^24 / 24! ~ 3e-17); its
+# piece's full norm 24 terms leave out less than 2^-53 of the result (``series_terms``); its
 # largest term is at most twice |z|, so little is lost to cancellation.
 PIECE_NORM = 2.0
 MAX_TERMS = 30
 # A norm of 131072, a step some 65,000 times the stability limit: no step a scene comes near
 # (about 1 at the default); past it one piece, whose overflow the runaway check stops.
 MAX_PIECES = 1 << 16
-SERIES_TOL = 2.0**-53  # a term this small against the sum, with the term before it: done
+SERIES_TOL = 2.0**-53  # what the terms left out may add, against the result
+
+
+def _reach(m: int) -> float:
+    """The largest norm ``nu`` of a piece whose series' first ``m`` terms (after the 1) leave
+    out at most ``SERIES_TOL`` of the result: what they leave out is at most ``|z| nu^(m+1) /
+    (m+1)! / (1 - nu / (m+2))`` and the result is at least ``|z| exp(-nu)`` (infinity
+    norms: ``z = exp(-B) exp(B) z``)."""
+
+    def enough(nu: float) -> bool:
+        rest = nu ** (m + 1) / math.factorial(m + 1) / (1.0 - nu / (m + 2))
+        return rest * math.exp(nu) <= SERIES_TOL
+
+    lo, hi = 0.0, PIECE_NORM
+    if enough(hi):
+        return hi
+    for _ in range(100):  # bisection to the last bit
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if enough(mid) else (lo, mid)
+    return lo
+
+
+# REACH[m - 1]: the largest piece norm that m terms serve (m = 1 .. MAX_TERMS; 24 serve a
+# piece's full norm, 18 a norm of 1, 14 of 0.5).
+REACH = tuple(_reach(m) for m in range(1, MAX_TERMS + 1))
+
+
+def series_terms(nu: float) -> int:
+    """Terms of the series for a piece of norm ``nu``: the fewest that ``REACH`` allows
+    (one where ``nu`` is not a number: the run has failed)."""
+    terms = 1
+    for reach in REACH:
+        if reach < PIECE_NORM and nu > reach:
+            terms += 1
+    return terms
 
 
 def _times(a, p00, p01, p10, p11, q00, q01, q10, q11, v0, v1, v2, v3):
@@ -68,12 +104,14 @@ def _times(a, p00, p01, p10, p11, q00, q01, q10, q11, v0, v1, v2, v3):
 def flow_times(a, p00, p01, p10, p11, q00, q01, q10, q11, z):
     """``exp(B) z`` for the flow's matrix ``B = [[0, a I], [P, Q]]`` (``P = [[p00, p01],
     [p10, p11]]``, ``Q`` alike; ``z`` four numbers): ``B`` cut into the fewest equal pieces of
-    infinity norm at most ``PIECE_NORM``, each applied by its Taylor series until two terms
-    in a row are below ``SERIES_TOL`` of the sum (the way of Al-Mohy and Higham's
-    ``expm_multiply``, which SciPy has). Only products of ``B`` with a vector, and those of its
+    infinity norm at most ``PIECE_NORM``, each applied by the first terms of its Taylor series
+    that the piece's norm says leave out at most ``SERIES_TOL`` of the result
+    (``series_terms``; Al-Mohy and Higham's ``expm_multiply``, which SciPy has, chooses its
+    terms from the norm alike). Only products of ``B`` with a vector, and those of its
     block form (10 multiplications), in a loop: the Pade exponential of the whole matrix it
     replaced (4 x 4 products, a solve, squarings, unrolled) took about 2.3x its time in
-    the pillar's jam (docs/performance.md)."""
+    the pillar's jam (docs/performance.md). The loop tests nothing as it goes: a test of
+    each term against the sum cost as much as the term (docs/performance.md)."""
     norm = max(
         abs(a),
         abs(p00) + abs(p01) + abs(q00) + abs(q01),
@@ -84,19 +122,15 @@ def flow_times(a, p00, p01, p10, p11, q00, q01, q10, q11, z):
         pieces = math.ceil(norm / PIECE_NORM)
     s = 1.0 / pieces
     b = (a * s, p00 * s, p01 * s, p10 * s, p11 * s, q00 * s, q01 * s, q10 * s, q11 * s)
+    terms = series_terms(norm * s)
     y = tuple(z)
     for _ in range(pieces):
         t = y
-        last = max(abs(t[0]), abs(t[1]), abs(t[2]), abs(t[3]))
-        for k in range(1, MAX_TERMS + 1):
+        for k in range(1, terms + 1):
             r = 1.0 / k
             t = _times(*b, *t)
             t = (t[0] * r, t[1] * r, t[2] * r, t[3] * r)
             y = (y[0] + t[0], y[1] + t[1], y[2] + t[2], y[3] + t[3])
-            size = max(abs(t[0]), abs(t[1]), abs(t[2]), abs(t[3]))
-            if size + last <= SERIES_TOL * max(abs(y[0]), abs(y[1]), abs(y[2]), abs(y[3])):
-                break
-            last = size
     return y
 
 

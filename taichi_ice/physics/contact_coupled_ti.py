@@ -10,7 +10,7 @@ the arguments); the products and sums in the same order. No field access:
 
 import taichi as ti
 
-from .contact_coupled import MAX_PIECES, MAX_TERMS, PIECE_NORM, SERIES_TOL
+from .contact_coupled import MAX_PIECES, MAX_TERMS, PIECE_NORM, REACH
 from .contact_step_ti import onset_ti, spring_dashpot_ti
 
 __all__ = ["coupled_flow_ti", "coupled_impulses_ti", "flow_times_ti"]
@@ -28,11 +28,6 @@ def _times(a, p00, p01, p10, p11, q00, q01, q10, q11, v0, v1, v2, v3):
 
 
 @ti.func
-def _largest(v0, v1, v2, v3):
-    return ti.max(ti.max(ti.max(ti.abs(v0), ti.abs(v1)), ti.abs(v2)), ti.abs(v3))
-
-
-@ti.func
 def flow_times_ti(a, p00, p01, p10, p11, q00, q01, q10, q11, z0, z1, z2, z3):
     """Twin of :func:`contact_coupled.flow_times`: ``exp(B) z``, four numbers."""
     norm = ti.max(
@@ -45,19 +40,20 @@ def flow_times_ti(a, p00, p01, p10, p11, q00, q01, q10, q11, z0, z1, z2, z3):
     s = 1.0 / (pieces + 0.0 * a)
     b0, b1, b2, b3, b4 = a * s, p00 * s, p01 * s, p10 * s, p11 * s
     b5, b6, b7, b8 = q00 * s, q01 * s, q10 * s, q11 * s
+    nu = norm * s  # the terms: ``contact_coupled.series_terms``
+    terms = 1
+    for m in ti.static(range(MAX_TERMS)):
+        if ti.static(REACH[m] < PIECE_NORM):
+            if nu > REACH[m]:
+                terms += 1
     y0, y1, y2, y3 = z0, z1, z2, z3
     for _ in range(pieces):
         t0, t1, t2, t3 = y0, y1, y2, y3
-        last = _largest(t0, t1, t2, t3)
-        for k in range(1, MAX_TERMS + 1):
+        for k in range(1, terms + 1):
             r = 1.0 / (k + 0.0 * a)
             t0, t1, t2, t3 = _times(b0, b1, b2, b3, b4, b5, b6, b7, b8, t0, t1, t2, t3)
             t0, t1, t2, t3 = t0 * r, t1 * r, t2 * r, t3 * r
             y0, y1, y2, y3 = y0 + t0, y1 + t1, y2 + t2, y3 + t3
-            size = _largest(t0, t1, t2, t3)
-            if size + last <= SERIES_TOL * _largest(y0, y1, y2, y3):
-                break
-            last = size
     return y0, y1, y2, y3
 
 

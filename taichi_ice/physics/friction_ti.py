@@ -13,7 +13,14 @@ import taichi as ti
 from ..codes import ThetaMethod
 from .fmath_ti import exp_any, log_any
 
-__all__ = ["rate_state_mu_ti", "slip_log_ti", "theta_equilibrium_ti", "theta_step_ti"]
+__all__ = [
+    "rate_state_mu_ti",
+    "slip_log_ti",
+    "theta_advance_ti",
+    "theta_decay_ti",
+    "theta_equilibrium_ti",
+    "theta_step_ti",
+]
 
 
 @ti.func
@@ -38,10 +45,27 @@ def theta_equilibrium_ti(x, B):
 def theta_step_ti(theta, x_start, x_mid, x_end, dt, B, t_c, method: ti.template()):
     """Taichi twin of :func:`friction.theta_step` (``method`` resolved at compile time)."""
     h = dt / t_c
+    return theta_advance_ti(theta, x_start, x_mid, x_end, h, theta_decay_ti(h, method), B, method)
+
+
+@ti.func
+def theta_decay_ti(h, method: ti.template()):
+    """``exp(-h)`` for the exponential method (``h`` = dt / t_c), which ``theta_step_ti`` takes:
+    the same for every theta of a step, so a caller that advances several computes it once
+    (an ``exp`` a call: a rate-and-state contact's law took three a sub-step)."""
+    decay = 0.0 * h
+    if ti.static(method == ThetaMethod.EXPONENTIAL):
+        decay = exp_any(-h)
+    return decay
+
+
+@ti.func
+def theta_advance_ti(theta, x_start, x_mid, x_end, h, decay, B, method: ti.template()):
+    """``theta_step_ti`` with ``h`` = dt / t_c and its ``theta_decay_ti`` given."""
     new = theta
     if ti.static(method == ThetaMethod.EXPONENTIAL):
         steady = -B * x_mid
-        new = steady + (theta - steady) * exp_any(-h)
+        new = steady + (theta - steady) * decay
     if ti.static(method == ThetaMethod.EULER):
         new = theta - h * (theta + B * x_start)
     if ti.static(method == ThetaMethod.IMPLICIT):

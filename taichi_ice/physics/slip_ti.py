@@ -14,7 +14,7 @@ import taichi as ti
 from ..codes import RestRule
 from .contact_law_ti import tangential_force_ti
 from .fmath_ti import exp_any, log_any
-from .friction_ti import theta_step_ti
+from .friction_ti import theta_advance_ti, theta_decay_ti
 from .slip import (
     NEW_CONTACT_ABOVE,
     NEWTON_ITERATIONS,
@@ -47,6 +47,35 @@ def contact_friction_ti(
 ):
     """Taichi twin of :func:`slip.contact_friction`; returns ``(mu, theta_new, V)``. ``tol`` is a
     compile-time constant, ``slip.NEWTON_TOLERANCE`` of the precision."""
+    h = dt / t_c
+    return _friction_ti(
+        theta, last_slip, slip, f_trial, f_n, K, h, theta_decay_ti(h, method), A, B, mu0, v_star,
+        memory, rule, method, tol,
+    )  # fmt: skip
+
+
+@ti.func
+def _friction_ti(
+    theta,
+    last_slip,
+    slip,
+    f_trial,
+    f_n,
+    K,
+    h,
+    decay,
+    A,
+    B,
+    mu0,
+    v_star,
+    memory,
+    rule,
+    method: ti.template(),
+    tol: ti.template(),
+):
+    """``contact_friction_ti`` with the state's step ``h`` = dt / t_c and its
+    ``friction_ti.theta_decay_ti`` given (``sliding_steps_ti``' sub-steps share them: the
+    values of ``slip.contact_friction``, which computes them for each theta it advances)."""
     speed = ti.abs(slip)
     theta_in = theta
     if rule == RestRule.PAPER and last_slip * slip < 0.0:
@@ -59,7 +88,7 @@ def contact_friction_ti(
     mu_low = mu0
     theta_low = NO_INTERFACE
     if not fresh and (rule == RestRule.HEALING or rule == RestRule.RELAXING):
-        theta_low = theta_step_ti(theta_in, 0.0, 0.0, 0.0, dt, B, t_c, method)
+        theta_low = theta_advance_ti(theta_in, 0.0, 0.0, 0.0, h, decay, B, method)
         if rule == RestRule.HEALING:  # relaxing keeps the paper's mu0
             mu_low = ti.max(mu0 + theta_low, 0.0)
     elif not fresh and rule == RestRule.FROZEN:
@@ -70,8 +99,8 @@ def contact_friction_ti(
     a = 0.0
     b = -B
     if not new:
-        a = theta_step_ti(start, 0.0, 0.0, 0.0, dt, B, t_c, method)
-        b = theta_step_ti(start, 1.0, 1.0, 1.0, dt, B, t_c, method) - a
+        a = theta_advance_ti(start, 0.0, 0.0, 0.0, h, decay, B, method)
+        b = theta_advance_ti(start, 1.0, 1.0, 1.0, h, decay, B, method) - a
     c0 = mu0 + a
     c1 = A + b
     mu = mu_low
@@ -101,7 +130,7 @@ def contact_friction_ti(
                     break
         theta_new = -B * y
         if not new:
-            theta_new = theta_step_ti(start, y, y, y, dt, B, t_c, method)
+            theta_new = theta_advance_ti(start, y, y, y, h, decay, B, method)
         mu = ti.max(mu0 + theta_new + A * y, 0.0)
         v = speed
         if not capped:
@@ -150,10 +179,12 @@ def sliding_steps_ti(
     slip_work = 0.0 * f_n
     damp_work = 0.0 * f_n
     held = 0.0 * f_n
+    h_c = h / t_c  # the state's step and its decay, the same in every sub-step
+    decay = theta_decay_ti(h_c, method)
     for _ in range(n):
         f_trial = ti.abs(k_t * (x + slip * h) + c_t * slip)
-        mu, th, v = contact_friction_ti(
-            th, last, slip, f_trial, f_n, k_t * h + c_t, h, A, B, mu0, v_star, t_c, memory,
+        mu, th, v = _friction_ti(
+            th, last, slip, f_trial, f_n, k_t * h + c_t, h_c, decay, A, B, mu0, v_star, memory,
             rule, method, tol,
         )  # fmt: skip
         f, x_new, sw, dw = tangential_force_ti(x, slip, h, k_t, c_t, mu * f_n)

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from taichi_ice import DivergenceError, Simulation, StabilityError, backend, load_scenario
-from taichi_ice.codes import EnergyTerm, Status
+from taichi_ice.codes import BodyKind, EnergyTerm, Status
 from taichi_ice.engine.energy import CONTACTS_COLUMN, STATUS_COLUMN
 from taichi_ice.engine.reference import (
     ReferenceModel,
@@ -984,6 +984,54 @@ def test_stepping_by_worlds_equals_stepping_by_bodies_bit_for_bit(f64, law, inte
     for other in (stepped("bodies")[0], stepped("bodies", kernels=True)[0]):
         for name, values in by_worlds.items():
             np.testing.assert_array_equal(other[name], values, err_msg=name)
+
+
+def test_a_thread_per_world_lists_every_pair_within_reach_as_the_hash_does(f64):
+    """The lists one thread per world builds (``ContactLists.build_list``: every pair of its
+    world, the circles tried first), after 300 steps of a box of 300 thrown diamonds in which
+    they were rebuilt: every pair of blocks whose bounding circles came within the skin at the
+    rebuild (counted in NumPy over every pair) is in the list of its lower id and no other,
+    nothing else is listed but the walls, each list ascends, and the lists are entry for entry
+    those the parallel step builds from the spatial hash."""
+    scene, _ = bench_scene("random", 300, "coulomb", False, 5)
+    if backend.loops_capped():  # as in the test below: one step of 300 bodies is refused
+        with pytest.raises(BackendError, match="65,535"):
+            World([scene], stepping="worlds").advance(1)
+        return
+    lists = {}
+    for stepping in ("worlds", "bodies"):
+        world = World([scene], stepping=stepping)
+        start = world.positions()
+        world.advance(300)
+        world.check()
+        n = world.batch.n_bodies
+        nb = world.neighbours
+        lists[stepping] = (nb.nbr_count.to_numpy()[:n], nb.nbr_ids.to_numpy()[:n])
+        ref = nb.nbr_ref_pos.to_numpy()[:n]
+        skin = float(world.host.list_skin)
+        radius = world.model.body_radius.to_numpy()[:n]  # the circumradii, an input
+        del world
+    assert np.max(np.hypot(*(ref - start).T)) > 0.5 * skin  # rebuilt along the way
+    count, ids = lists["worlds"]
+    np.testing.assert_array_equal(count, lists["bodies"][0])
+    for i in range(len(count)):
+        np.testing.assert_array_equal(ids[i, : count[i]], lists["bodies"][1][i, : count[i]])
+    blocks = np.flatnonzero(scene.kinds == int(BodyKind.DYNAMIC))
+    walls = set(np.flatnonzero(scene.kinds != int(BodyKind.DYNAMIC)).tolist())
+    assert len(walls) == 4
+    want = {i: set() for i in blocks}
+    for a, i in enumerate(blocks):
+        d = ref[blocks[a + 1 :]] - ref[i]
+        reach = radius[i] + radius[blocks[a + 1 :]] + skin
+        near = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] < reach * reach
+        want[i] = set(blocks[a + 1 :][near].tolist())
+    pairs = 0
+    for i in blocks:
+        got = ids[i, : count[i]].tolist()
+        assert got == sorted(got)
+        assert {j for j in got if j not in walls} == want[i], i
+        pairs += len(want[i])
+    assert pairs > 300  # the box is packed: most blocks have listed neighbours
 
 
 @pytest.mark.parametrize("stepping", ["worlds", "bodies"])

@@ -119,9 +119,9 @@ class NeighbourList(Fields):
     steps (a Verlet list).
 
     A body's list holds the partners of its world it owns whose bounding circles come within
-    the skin (``list_skin``) of its own, in ascending id (``ContactStage.build_list``, or
-    ``build_lists`` through the hash). As long as no body of the world has moved more than
-    half the skin since (``Integrator.moved``), no
+    the skin (``list_skin``) of its own, in ascending id (``ContactLists.build_world``, a
+    thread per world, or ``build_lists`` through the hash). As long as no body of the world
+    has moved more than half the skin since (``Integrator.moved``), no
     pair outside the lists can have come into contact, so each step only filters its list by
     the exact bounding-circle test; the step that finds a body past half the skin marks the
     world's lists stale (``world_nbr_stale``, and ``nbr_rebuild`` for the parallel step), and

@@ -93,6 +93,10 @@ class WorldStepper(Stage):
                 "probe_impulse",
                 "status",
                 "time_step",
+                "large_ids",
+                "sweep_ids",
+                "sweep_start",
+                "world_large_start",
                 "vert_local",
                 "vert_normal_local",
                 "world_body_start",
@@ -135,6 +139,8 @@ class WorldStepper(Stage):
                 "world_nbr_stale",
                 "nbr_rebuild",
                 "body_time",
+                "sweep_ids",
+                "sweep_start",
             ),
             per_contact=ContactStage.ACCESS["compute"].per_contact,
         )
@@ -176,8 +182,7 @@ class WorldStepper(Stage):
         lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
         for _s in range(n):
             if nb.world_nbr_stale[w]:
-                for i in range(lo, hi):
-                    self.contacts.build_list(i)
+                self.contacts.build_world(w)
                 nb.world_nbr_stale[w] = 0
             for i in range(lo, hi):
                 self.contacts.listed(i, dt, True)

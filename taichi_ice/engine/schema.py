@@ -563,7 +563,7 @@ def markdown_table() -> str:
     titles = {
         "model": "Model: static after set-up",
         "data": "Data: mutable",
-        "hash": "Spatial hash: rebuilt with the neighbour lists of the parallel step",
+        "hash": "Spatial hash and strips: scratch of the list rebuilds (the hash the parallel step's, the strips a thread per world's)",
         "nbr": "Neighbour lists: rebuilt when a body has moved half the skin",
     }
     for group, fields in groups().items():

@@ -414,28 +414,29 @@ class ContactLists(Stage):
         m, d, h = ti.static((self.model, self.data, self.hash))
         lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
         widest = ti.cast(0.0, ti.f64)
-        low = ti.Vector([1e300, 1e300], ti.f64)
-        high = -low
+        low_x, low_y = ti.cast(1e300, ti.f64), ti.cast(1e300, ti.f64)
+        high_x, high_y = -low_x, -low_y
         for k in range(lo, hi):
             if m.body_small[k]:
                 widest = ti.max(widest, ti.cast(m.body_radius[k], ti.f64))
-                low = ti.min(low, d.body_pos[k])
-                high = ti.max(high, d.body_pos[k])
-        axis = 0
-        if high[1] - low[1] > high[0] - low[0]:
-            axis = 1
+                p = d.body_pos[k]
+                low_x, low_y = ti.min(low_x, p[0]), ti.min(low_y, p[1])
+                high_x, high_y = ti.max(high_x, p[0]), ti.max(high_y, p[1])
+        across = high_y - low_y > high_x - low_x  # the strips along y, else along x
+        start = ti.select(across, low_y, low_x)
+        span = ti.select(across, high_y, high_x) - start
         # (Widened by a millionth: list_add's reach rounds in the run's precision.)
         width = (2.0 * widest + ti.cast(m.list_skin[None], ti.f64)) * (1.0 + 1e-6)
         strips = 1
-        if high[axis] > low[axis]:  # some small body; at most a strip a body of the world
-            strips = ti.cast(ti.min((high[axis] - low[axis]) / width, hi - lo - 1.0), ti.i32) + 1
+        if span > 0.0:  # some small bodies apart; at most a strip a body of the world
+            strips = ti.cast(ti.min(span / width, hi - lo - 1.0), ti.i32) + 1
         if hi > lo:
             h.sweep_start[lo] = 0
         for b in range(1, strips):
             h.sweep_start[lo + b] = 0
         for k in range(lo, hi):
             if m.body_small[k]:
-                b = self.strip(k, axis, low[axis], width, strips)
+                b = self.strip(k, across, start, width, strips)
                 h.sweep_start[lo + b] += 1
         total = 0
         for b in range(strips):  # the counts become each strip's first entry
@@ -444,13 +445,13 @@ class ContactLists(Stage):
             total += count
         for k in range(lo, hi):  # ... and, filled, the entry after its last
             if m.body_small[k]:
-                b = self.strip(k, axis, low[axis], width, strips)
+                b = self.strip(k, across, start, width, strips)
                 h.sweep_ids[lo + h.sweep_start[lo + b]] = k
                 h.sweep_start[lo + b] += 1
         for i in range(lo, hi):
             n = 0
             if m.body_small[i]:
-                b = self.strip(i, axis, low[axis], width, strips)
+                b = self.strip(i, across, start, width, strips)
                 first = 0
                 if b >= 2:
                     first = h.sweep_start[lo + b - 2]
@@ -463,9 +464,10 @@ class ContactLists(Stage):
             self.end_list(i, n)
 
     @ti.func
-    def strip(self, k, axis, low, width, strips):
+    def strip(self, k, across, start, width, strips):
         """The strip of ``build_world`` that body k's centroid lies in."""
-        b = ti.cast((self.data.body_pos[k][axis] - low) / width, ti.i32)
+        p = self.data.body_pos[k]
+        b = ti.cast((ti.select(across, p[1], p[0]) - start) / width, ti.i32)
         return ti.min(ti.max(b, 0), strips - 1)
 
     @ti.func

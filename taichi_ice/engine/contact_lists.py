@@ -437,7 +437,9 @@ class ContactLists(Stage):
         for k in range(lo, hi):
             if m.body_small[k]:
                 b = self.strip(k, across, start, width, strips)
-                h.sweep_start[lo + b] += 1
+                # Plain loads and stores (one thread owns the world's rows): an augmented
+                # assignment is an atomic, and integer atomics in loops fail on some GPUs.
+                h.sweep_start[lo + b] = h.sweep_start[lo + b] + 1
         total = 0
         for b in range(strips):  # the counts become each strip's first entry
             count = h.sweep_start[lo + b]
@@ -447,7 +449,7 @@ class ContactLists(Stage):
             if m.body_small[k]:
                 b = self.strip(k, across, start, width, strips)
                 h.sweep_ids[lo + h.sweep_start[lo + b]] = k
-                h.sweep_start[lo + b] += 1
+                h.sweep_start[lo + b] = h.sweep_start[lo + b] + 1
         for i in range(lo, hi):
             n = 0
             if m.body_small[i]:

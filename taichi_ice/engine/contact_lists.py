@@ -409,8 +409,8 @@ class ContactLists(Stage):
         a world of 1,000 fast bodies (a million pairs a rebuild); here its bodies are counted
         into strips across its longer side, each as wide as any small pair's reach (two of
         the widest small bodies' radii and the skin), and a small body tries the small bodies
-        of its strip and the two beside it, and the world's large bodies (``sweep_ids``: the
-        bodies strip by strip; ``sweep_start``: where each strip's run ends)."""
+        of its strip and the two beside it, and the world's large bodies (``strip_ids``: the
+        bodies strip by strip; ``strip_end``: where each strip's run ends)."""
         m, d, h = ti.static((self.model, self.data, self.hash))
         lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
         widest = ti.cast(0.0, ti.f64)
@@ -431,35 +431,35 @@ class ContactLists(Stage):
         if span > 0.0:  # some small bodies apart; at most a strip a body of the world
             strips = ti.cast(ti.min(span / width, hi - lo - 1.0), ti.i32) + 1
         if hi > lo:
-            h.sweep_start[lo] = 0
+            h.strip_end[lo] = 0
         for b in range(1, strips):
-            h.sweep_start[lo + b] = 0
+            h.strip_end[lo + b] = 0
         for k in range(lo, hi):
             if m.body_small[k]:
                 b = self.strip(k, across, start, width, strips)
                 # Plain loads and stores (one thread owns the world's rows): an augmented
                 # assignment is an atomic, and integer atomics in loops fail on some GPUs.
-                h.sweep_start[lo + b] = h.sweep_start[lo + b] + 1
+                h.strip_end[lo + b] = h.strip_end[lo + b] + 1
         total = 0
         for b in range(strips):  # the counts become each strip's first entry
-            count = h.sweep_start[lo + b]
-            h.sweep_start[lo + b] = total
+            count = h.strip_end[lo + b]
+            h.strip_end[lo + b] = total
             total += count
         for k in range(lo, hi):  # ... and, filled, the entry after its last
             if m.body_small[k]:
                 b = self.strip(k, across, start, width, strips)
-                h.sweep_ids[lo + h.sweep_start[lo + b]] = k
-                h.sweep_start[lo + b] = h.sweep_start[lo + b] + 1
+                h.strip_ids[lo + h.strip_end[lo + b]] = k
+                h.strip_end[lo + b] = h.strip_end[lo + b] + 1
         for i in range(lo, hi):
             n = 0
             if m.body_small[i]:
                 b = self.strip(i, across, start, width, strips)
                 first = 0
                 if b >= 2:
-                    first = h.sweep_start[lo + b - 2]
-                last = h.sweep_start[lo + ti.min(b + 1, strips - 1)]
+                    first = h.strip_end[lo + b - 2]
+                last = h.strip_end[lo + ti.min(b + 1, strips - 1)]
                 for e in range(first, last):
-                    n = self.list_add(i, h.sweep_ids[lo + e], n)
+                    n = self.list_add(i, h.strip_ids[lo + e], n)
             for g in range(m.world_large_start[w], m.world_large_start[w + 1]):
                 n = self.list_add(i, m.large_ids[g], n)
             self.sort_list(i, n)

@@ -272,8 +272,8 @@ HASH: tuple[Var, ...] = (
     Var("bucket_end", "i32", ("hash_size",), "id", "one past the last entry of each bucket in sorted_ids (its start while filling)"),
     Var("block_total", "i32", ("scan_blocks",), "", "per-block totals of the two-level scan"),
     Var("sorted_ids", "i32", ("n_small",), "id", "small body ids, grouped by bucket"),
-    Var("sweep_ids", "i32", ("n_bodies",), "id", "a thread per world's list build (ContactLists.build_world): each world's small bodies, strip by strip"),
-    Var("sweep_start", "i32", ("n_bodies",), "id", "the same: where each strip's entries end in sweep_ids"),
+    Var("strip_ids", "i32", ("n_bodies",), "id", "a thread per world's list build (ContactLists.build_world): each world's small bodies, strip by strip"),
+    Var("strip_end", "i32", ("n_bodies",), "id", "the same: where each strip's entries end in strip_ids"),
 )
 
 # Neighbour lists with a skin (broadphase.NeighbourList), rebuilt when a body has moved half

@@ -57,8 +57,10 @@ def worker(
     world = sim.world
     if state_file and Path(state_file).is_file():  # the first tree's jam (--same-state)
         sim.run(until=sim.dt)  # compiled (or loaded)
+        # The fields this tree has and the first lacks (scratch added since) keep their own.
+        state = world.transfer.read()
         with np.load(state_file) as saved:
-            state = {name: saved[name] for name in saved.files if name != "_steps"}
+            state.update({name: saved[name] for name in saved.files if name in state})
             done = int(saved["_steps"])
         origin = "loaded"
     else:

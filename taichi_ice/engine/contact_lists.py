@@ -407,26 +407,25 @@ class ContactLists(Stage):
         """Every list of world w by one thread (``WorldStepper``): the lists
         ``build_list_hashed`` builds. Trying every pair of the world took most of the step of
         a world of 1,000 fast bodies (a million pairs a rebuild); here its bodies are counted
-        into strips across its longer side, each as wide as any small pair's reach (two of
-        the widest small bodies' radii and the skin), and a small body tries the small bodies
+        into strips across its longer side, each as wide as any small pair's reach (the
+        spatial hash's cell), and a small body tries the small bodies
         of its strip and the two beside it, and the world's large bodies (``strip_ids``: the
         bodies strip by strip; ``strip_end``: where each strip's run ends)."""
         m, d, h = ti.static((self.model, self.data, self.hash))
         lo, hi = m.world_body_start[w], m.world_body_start[w + 1]
-        widest = ti.cast(0.0, ti.f64)
         low_x, low_y = ti.cast(1e300, ti.f64), ti.cast(1e300, ti.f64)
         high_x, high_y = -low_x, -low_y
         for k in range(lo, hi):
             if m.body_small[k]:
-                widest = ti.max(widest, ti.cast(m.body_radius[k], ti.f64))
                 p = d.body_pos[k]
                 low_x, low_y = ti.min(low_x, p[0]), ti.min(low_y, p[1])
                 high_x, high_y = ti.max(high_x, p[0]), ti.max(high_y, p[1])
         across = high_y - low_y > high_x - low_x  # the strips along y, else along x
         start = ti.select(across, low_y, low_x)
         span = ti.select(across, high_y, high_x) - start
-        # (Widened by a millionth: list_add's reach rounds in the run's precision.)
-        width = (2.0 * widest + ti.cast(m.list_skin[None], ti.f64)) * (1.0 + 1e-6)
+        # The hash's cell: the batch's widest small diameter and the skin (widened by a
+        # millionth: list_add's reach rounds in the run's precision).
+        width = (1.0 + 1e-6) / m.grid_inv_cell[None]
         strips = 1
         if span > 0.0:  # some small bodies apart; at most a strip a body of the world
             strips = ti.cast(ti.min(span / width, hi - lo - 1.0), ti.i32) + 1

@@ -93,6 +93,7 @@ class WorldStepper(Stage):
                 "probe_impulse",
                 "status",
                 "time_step",
+                "grid_inv_cell",
                 "large_ids",
                 "strip_ids",
                 "strip_end",

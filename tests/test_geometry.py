@@ -25,6 +25,7 @@ from taichi_ice.physics.polygon import (
     rectangle,
     rotation,
     sat_separated,
+    separation_gap,
     transform,
 )
 
@@ -265,6 +266,42 @@ def test_taichi_facing_edge_equals_its_numpy_twin(batch, taichi_runtime):
         assert facing_gap(p, q, _toward(p, q)) == pytest.approx(-reach, abs=1e-12 * size)
         checked += 1
     assert checked > 0.9 * N_PAIRS
+
+
+def test_separation_gap_bounds_the_distance_and_its_sign_is_the_sat_verdict(pairs, reference):
+    """Every edge normal of both polygons tried: a gap >= 0 proves the pair apart (shapely: no
+    intersection) and is at most their distance, which the contact step relies on to skip a
+    pair while both move less; a negative one is minus the smallest penetration; and it
+    settles every separated pair, where the facing edges settle most."""
+    apart = beyond_facing = 0
+    for (p, q), shape in zip(pairs, reference[1]):
+        size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
+        depth = min_penetration_axis(p, q)[0]
+        if abs(depth) < TOUCH_RTOL * size:
+            continue
+        gap = separation_gap(p, q)
+        assert (gap >= 0.0) == (shape.area == 0.0) == (not Polygon(p).intersects(Polygon(q)))
+        if gap >= 0.0:
+            apart += 1
+            distance = Polygon(p).distance(Polygon(q))
+            assert gap <= distance * (1 + SHAPELY_RTOL) + 1e-12
+            facing = max(facing_gap(p, q, _toward(p, q)), facing_gap(q, p, _toward(q, p)))
+            assert gap >= facing
+            beyond_facing += facing < 0.0
+        else:
+            assert gap == pytest.approx(-depth, rel=1e-12)
+    print(f"{beyond_facing} of {apart} separated pairs are settled only past the facing edges")
+    assert apart > N_PAIRS // 10
+    assert beyond_facing > 0
+
+
+def test_taichi_separation_gap_equals_its_numpy_twin(batch, taichi_runtime):
+    """separation_gap_ti gives separation_gap's gap on random pairs, to round-off."""
+    result, rounded = batch
+    rtol = _ti_rtol(taichi_runtime)
+    for b, (p, q) in enumerate(rounded):
+        size = np.sqrt(min(mass_properties(p)[0], mass_properties(q)[0]))
+        assert result.separation_gap[b] == pytest.approx(separation_gap(p, q), abs=rtol * size)
 
 
 def test_taichi_matches_numpy_on_random_pairs(batch, taichi_runtime):

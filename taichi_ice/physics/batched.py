@@ -46,6 +46,7 @@ from .polygon_ti import (
     overlap_ti,
     rotation_ti,
     sat_separated_ti,
+    separation_gap_ti,
 )
 from .slip import NEWTON_TOLERANCE
 from .slip_ti import contact_friction_ti, sliding_steps_ti
@@ -294,6 +295,7 @@ def _overlap_batch_kernel(
     axis_out: ti.types.ndarray(ndim=2),
     separated_out: ti.types.ndarray(ndim=1),
     gap_out: ti.types.ndarray(ndim=1),
+    separation_out: ti.types.ndarray(ndim=1),
 ):
     for b in range(area_out.shape[0]):
         # The gather the contact kernel does: vertices into fixed-size local matrices.
@@ -318,9 +320,9 @@ def _overlap_batch_kernel(
             toward += ti.math.vec2(q[k, 0], q[k, 1]) / n_q_in[b]
         for k in range(n_p_in[b]):
             toward -= ti.math.vec2(p[k, 0], p[k, 1]) / n_p_in[b]
-        gap_out[b] = facing_gap_ti(
-            p, edge_normals_ti(p, n_p_in[b]), n_p_in[b], q, n_q_in[b], toward
-        )
+        p_normals, q_normals = edge_normals_ti(p, n_p_in[b]), edge_normals_ti(q, n_q_in[b])
+        gap_out[b] = facing_gap_ti(p, p_normals, n_p_in[b], q, n_q_in[b], toward)
+        separation_out[b] = separation_gap_ti(p, p_normals, n_p_in[b], q, q_normals, n_q_in[b])
         for d in ti.static(range(2)):
             centroid_out[b, d] = centroid[d]
             normal_out[b, d] = normal[d]
@@ -335,6 +337,7 @@ class BatchOverlap(NamedTuple):
         kind: ``(B,)`` int32. depth: ``(B,)`` SAT minimum penetration (m). axis: ``(B, 2)``
         its unit axis, ``p -> q``. separated: ``(B,)`` bool, the SAT verdict. facing_gap:
         ``(B,)`` m, :func:`polygon_ti.facing_gap_ti` toward ``q``'s vertex mean from ``p``'s.
+        separation_gap: ``(B,)`` m, :func:`polygon_ti.separation_gap_ti`, every axis.
         facing: ``(B,)`` bool, that gap >= 0 (the facing edge separates the pair).
     """
 
@@ -347,6 +350,7 @@ class BatchOverlap(NamedTuple):
     axis: np.ndarray
     separated: np.ndarray
     facing_gap: np.ndarray
+    separation_gap: np.ndarray
     facing: np.ndarray
 
 
@@ -389,6 +393,7 @@ def overlap_batch_ti(p, n_p, q, n_q) -> BatchOverlap:
         axis=np.zeros((batch, 2), real),
         separated=np.zeros(batch, np.int32),
         facing_gap=np.zeros(batch, real),
+        separation_gap=np.zeros(batch, real),
         facing=np.zeros(batch, bool),
     )
     if batch:

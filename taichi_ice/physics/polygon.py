@@ -342,6 +342,27 @@ def facing_gap(p: np.ndarray, q: np.ndarray, toward) -> float:
     return float(np.min((np.asarray(q, dtype=np.float64) - p[k]) @ normals[k]))
 
 
+def separation_gap(p: np.ndarray, q: np.ndarray) -> float:
+    """The widest gap along any edge normal of ``p`` or ``q`` (m): >= 0 proves the pair
+    apart by at least that much (touching counts as apart), < 0 is minus their smallest
+    penetration (``min_penetration_axis``' depth). The separating-axis test run over every
+    axis, for the gap: the contact step tries it on a pair that was not in contact, when
+    neither facing edge (``facing_gap``) separates it, so that the pair is skipped while
+    the gap holds (``ContactStage.gap_bound``).
+
+    Args:
+        p: ``(n, 2)`` counter-clockwise convex polygon (m).
+        q: ``(m, 2)`` counter-clockwise convex polygon (m).
+    """
+    p = np.asarray(p, dtype=np.float64)
+    q = np.asarray(q, dtype=np.float64)
+    gap = -np.inf
+    for own, other in ((p, q), (q, p)):
+        for a, n in zip(own, edge_normals(own)):  # as facing_gap computes one edge's
+            gap = max(gap, float(np.min((other - a) @ n)))
+    return gap
+
+
 def facing_separated(p: np.ndarray, q: np.ndarray, toward) -> bool:
     """True when the edge of ``p`` that faces ``toward`` separates ``p`` from ``q``
     (``facing_gap`` >= 0). A sufficient test, not a complete one: the contact step tries it
@@ -572,6 +593,7 @@ __all__ = [
     "rectangle",
     "rotation",
     "sat_separated",
+    "separation_gap",
     "signed_area",
     "transform",
 ]

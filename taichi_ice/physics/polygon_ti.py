@@ -228,6 +228,24 @@ def sat_separated_ti(p: ti.template(), n_p, q: ti.template(), n_q):
 
 
 @ti.func
+def separation_gap_ti(
+    p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), q_normals: ti.template(), n_q
+):
+    """Taichi twin of :func:`polygon.separation_gap`, the outward unit normals of both
+    polygons' edges given: the widest gap along any edge normal of either (m; >= 0: apart
+    by at least that much). Every axis, unrolled over the matrices' static size (rows past
+    the count skipped), as ``_min_penetration_axis_ti``."""
+    gap = -_reach_past_ti(_row(p, 0), _row(p_normals, 0), q, n_q)
+    for k in ti.static(range(1, p.n)):
+        if k < n_p:
+            gap = ti.max(gap, -_reach_past_ti(_row(p, k), _row(p_normals, k), q, n_q))
+    for k in ti.static(range(q.n)):
+        if k < n_q:
+            gap = ti.max(gap, -_reach_past_ti(_row(q, k), _row(q_normals, k), p, n_p))
+    return gap
+
+
+@ti.func
 def facing_gap_ti(p: ti.template(), p_normals: ti.template(), n_p, q: ti.template(), n_q, toward):
     """Taichi twin of :func:`polygon.facing_gap`, the outward unit normals of ``p``'s edges given
     (``edge_normals_ti``, or a body's turned ``vert_normal_local``)."""
@@ -459,4 +477,5 @@ __all__ = [
     "overlap_ti",
     "rotation_ti",
     "sat_separated_ti",
+    "separation_gap_ti",
 ]

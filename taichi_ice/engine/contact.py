@@ -239,7 +239,7 @@ class ContactStage(ContactLists):
         q, n_q = self.outline(j, xi_)
         # Most candidates (bounding circles that meet) do not touch, and one of the two
         # edges that face each other separates 99 % of those in a random box of 1e4 diamonds
-        # (-14 % of a step's CPU time there), 70 % in the pillar's nested rows: for a pair
+        # (-14 % of a step's CPU time there), 60-75 % in the pillar's rows: for a pair
         # not in contact last step, every edge then, for a gap that skips it for steps to come.
         toward = ti.cast(xj_ - xi_, self.layout.real)
         gap = facing_gap_ti(p, p_normals, n_p, q, n_q, toward)

@@ -1069,8 +1069,14 @@ def test_skipping_pairs_a_gap_keeps_apart_changes_nothing(f64, stepping):
     assert skippable > 0.5 * listed, (skippable, listed)
     skipped = {name: getattr(skipping, name)() for name in (*MOTION, "energies")}
     del skipping
-    testing = World([scene], stepping=stepping)
-    for _ in range(300):
+    _steps_alike_with_every_gap_forgotten(scene, 300, skipped, stepping=stepping)
+
+
+def _steps_alike_with_every_gap_forgotten(scene, steps: int, skipped: dict, **options) -> None:
+    """A World of ``scene`` stepped ``steps`` steps with every gap forgotten before each (every
+    listed pair tested) ends where ``skipped`` (``{reader: values}``) says, bit for bit."""
+    testing = World([scene], **options)
+    for _ in range(steps):
         testing.neighbours.nbr_gap.fill(-1.0)
         testing.advance(1)
     testing.check()
@@ -1120,13 +1126,7 @@ def test_a_listed_pair_apart_past_its_facing_edges_keeps_a_gap_too(f64):
     assert kept > 100 and past_facing > 10, (kept, past_facing)
     skipped = {name: getattr(skipping, name)() for name in (*MOTION, "energies")}
     del skipping
-    testing = World([scene])
-    for _ in range(200):
-        testing.neighbours.nbr_gap.fill(-1.0)
-        testing.advance(1)
-    testing.check()
-    for name, values in skipped.items():
-        np.testing.assert_array_equal(getattr(testing, name)(), values, err_msg=name)
+    _steps_alike_with_every_gap_forgotten(scene, 200, skipped)
 
 
 def test_a_world_past_taichis_field_trees_is_refused_with_a_clear_error(monkeypatch):

@@ -182,7 +182,7 @@ class Integrator(Stage):
     def moving(self, i):
         """Mark body i's world's lists stale if it has moved half their skin. Its path since
         (``nbr_path``) bounds how far it moved: below half the skin, as most steps are, no
-        square root is taken (a tenth of a step of the pillar before its jam)."""
+        square root is taken (about 2 % of a step of the pillar before its jam)."""
         m, nb = ti.static((self.model, self.neighbours))
         half = 0.5 * ti.cast(m.list_skin[None], ti.f64)
         if nb.nbr_path[i] > half:

@@ -62,6 +62,8 @@ import signal
 import subprocess
 import sys
 
+from . import frontend
+
 ARCHES = ("cpu", "gpu", "cuda", "vulkan", "metal")
 PRECISIONS = ("f64", "f32")
 
@@ -442,7 +444,8 @@ def init(
     import taichi as ti
 
     level = optimize_level(optimize, arch)
-    use_fast_positions()
+    frontend.use_fast_positions()
+    frontend.use_cached_sources()
     with _quiet_start():
         ti.init(
             arch=getattr(ti, arch),
@@ -479,46 +482,6 @@ def init(
     spirv = _actual in SPIRV_ARCHES
     _int_atomics_ok = _integer_atomics_in_loops_work() if spirv else True
     _loops_ok = _loops_uncapped() if spirv else True
-
-
-def source_position(ctx, node) -> str:
-    """Where ``node`` of a kernel's source is, as Taichi's errors show it: "File ..., line
-    N, in f:", the line, and a caret under the node (from its column to the line's end when
-    it spans lines).
-
-    Taichi builds this text for every statement and expression of every kernel it turns into
-    IR, also when the kernel comes from its offline cache (the cache key is that IR), and
-    wraps each line at 80 columns with ``textwrap``: measured on 2 cores, a third of a cached
-    start of ``two_squares`` (2.7-2.9 s to its first steps, 1.8-2.0 s without the wrapping;
-    the pillar compiled anew, tests' setting, 5.3-6.3 s and 4.4-5.7 s). This is the same
-    text without the wrapping and the lines after a node's first (``use_fast_positions``).
-    """
-    lineno = node.lineno + ctx.lineno_offset
-    code = ctx.src[node.lineno - 1]
-    start = ctx.indent + node.col_offset
-    if node.end_lineno == node.lineno:
-        end = ctx.indent + node.end_col_offset
-    else:
-        end = len(code.rstrip())
-    hint = " " * start + "^" * max(end - start, 1)
-    return f'File "{ctx.file}", line {lineno}, in {ctx.func.func.__name__}:\n{code}\n{hint}\n'
-
-
-def use_fast_positions() -> bool:
-    """Let Taichi describe a kernel's source positions with ``source_position`` (no
-    ``textwrap``); True when in effect. Only on the Taichi this package pins (1.7.4), whose
-    ``ASTTransformerContext.get_pos_info`` it replaces; elsewhere Taichi is left as is."""
-    import taichi as ti
-
-    try:
-        from taichi.lang.ast import ast_transformer_utils as utils
-    except ImportError:
-        return False
-    context = getattr(utils, "ASTTransformerContext", None)
-    if tuple(ti.__version__) != (1, 7, 4) or not hasattr(context, "get_pos_info"):
-        return False
-    context.get_pos_info = source_position
-    return True
 
 
 @contextlib.contextmanager

@@ -15,14 +15,16 @@ cores (the same bits were checked here with it while "full" was the default).
 
 from __future__ import annotations
 
+import inspect
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import taichi as ti
 
-from taichi_ice import backend
+from taichi_ice import backend, frontend
 from taichi_ice.engine import state
 from taichi_ice.errors import BackendError
 
@@ -177,12 +179,12 @@ def test_the_integer_atomics_probe_passes_on_a_correct_device(taichi_runtime):
 
 
 def test_a_kernel_error_still_names_its_file_line_and_column(taichi_runtime):
-    """Taichi's source positions come from ``backend.source_position`` (no line wrapping:
+    """Taichi's source positions come from ``frontend.source_position`` (no line wrapping:
     a third of a cached start), and an error in a kernel still says where, held against this
     file's own text."""
     from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
 
-    assert ASTTransformerContext.get_pos_info is backend.source_position
+    assert ASTTransformerContext.get_pos_info is frontend.source_position
 
     out = ti.field(ti.i32, shape=())
 
@@ -201,3 +203,47 @@ def test_a_kernel_error_still_names_its_file_line_and_column(taichi_runtime):
     at = lines.index(f'File "{__file__}", line {lineno}, in broken:')
     assert lines[at + 1] == text[lineno - 1]
     assert lines[at + 2] == " " * column + "^" * len("undefined_on_purpose")
+
+
+_SOURCES = """
+import sys
+from taichi_ice import backend, frontend, load_scenario
+from taichi_ice.engine.world import World
+
+if sys.argv[1] == "taichi":  # Taichi reading every source at every call site, as it ships
+    frontend.use_cached_sources = lambda: False
+backend.init("cpu", "f64")
+w = World([load_scenario("two_squares")])
+w.advance(2)
+"""
+
+
+def _sources_run(reader: str, cache: Path) -> list[str]:
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(cache))
+    out = subprocess.run(
+        [sys.executable, "-c", _SOURCES, reader],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    return sorted(p.name for p in cache.glob("*.tic"))  # written as the process ends
+
+
+def test_sources_read_once_give_the_ir_taichi_reads(tmp_path):
+    """``frontend.use_cached_sources`` (each function's source read once a process) builds
+    the IR Taichi builds reading every source at every call site: a process with it finds
+    every kernel in the offline cache that a process without it wrote there (Taichi's keys
+    are hashes of the IR), and adds none."""
+    from taichi.lang import kernel_impl
+
+    assert frontend.use_cached_sources()  # in effect in this process (and idempotent)
+    assert isinstance(kernel_impl.textwrap, frontend._KeptTextwrap)
+    lines, _ = kernel_impl.getsourcelines(_sources_run)
+    lines.append("changed by a caller")
+    assert kernel_impl.getsourcelines(_sources_run) == inspect.getsourcelines(_sources_run)
+
+    written = _sources_run("taichi", tmp_path)
+    assert len(written) >= 3  # the stepping kernel and the World's others
+    assert _sources_run("kept", tmp_path) == written

@@ -6,9 +6,10 @@ a small scene that front end is about half the time to the first step. Two of it
 repeat work whose answer cannot change within a process, and ``backend.init`` removes them
 before Taichi starts: the text of each source position, wrapped at 80 columns for every
 statement and expression (``use_fast_positions``), and the source of each function, read
-again at every call site it is inlined into (``use_cached_sources``). Neither changes the IR
-(``tests/test_backend.py`` holds it by the offline cache's keys), so neither changes a bit a
-run computes. On another Taichi both leave it as it is.
+again at every call site it is inlined into (``use_cached_sources``). Reading the sources
+once builds the same IR (``tests/test_backend.py`` holds it by the offline cache's keys);
+the unwrapped positions change only the text of Taichi's errors, which still name the file,
+line and column (the same test file). On another Taichi both leave it as it is.
 """
 
 from __future__ import annotations

@@ -16,6 +16,15 @@ from __future__ import annotations
 
 import textwrap
 
+# The Taichi whose front end these patches know: on any other they leave it as it is.
+PINNED_TAICHI = (1, 7, 4)
+
+
+def _pinned() -> bool:
+    import taichi as ti
+
+    return tuple(ti.__version__) == PINNED_TAICHI
+
 
 def source_position(ctx, node) -> str:
     """Where ``node`` of a kernel's source is, as Taichi's errors show it: "File ..., line
@@ -44,14 +53,12 @@ def use_fast_positions() -> bool:
     """Let Taichi describe a kernel's source positions with ``source_position`` (no
     ``textwrap``); True when in effect. Only on the Taichi this package pins (1.7.4), whose
     ``ASTTransformerContext.get_pos_info`` it replaces; elsewhere Taichi is left as is."""
-    import taichi as ti
-
     try:
         from taichi.lang.ast import ast_transformer_utils as utils
     except ImportError:
         return False
     context = getattr(utils, "ASTTransformerContext", None)
-    if tuple(ti.__version__) != (1, 7, 4) or not hasattr(context, "get_pos_info"):
+    if not _pinned() or not hasattr(context, "get_pos_info"):
         return False
     context.get_pos_info = source_position
     return True
@@ -75,14 +82,12 @@ def use_cached_sources() -> bool:
     what it was (``tests/test_backend.py``). A source file edited while a process runs is
     not read again by it: a kernel compiled later sees the source as first read, as a
     Python function's code does."""
-    import taichi as ti
-
     try:
         from taichi.lang import kernel_impl
     except ImportError:
         return False
     names = ("getsourcefile", "getsourcelines", "textwrap")
-    if tuple(ti.__version__) != (1, 7, 4) or not all(hasattr(kernel_impl, n) for n in names):
+    if not _pinned() or not all(hasattr(kernel_impl, n) for n in names):
         return False
     if isinstance(kernel_impl.textwrap, _KeptTextwrap):
         return True

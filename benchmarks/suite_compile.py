@@ -9,8 +9,9 @@ starts empty in ``--out``, with this file loaded into each worker as a pytest pl
 (``-p suite_compile``): it wraps Taichi's ``Kernel.materialize`` (the Python front end of a
 new instance of a kernel) and the first launch of that instance (its compile, and one run),
 and writes a row per compile to ``--out/rows/<pid>.jsonl``: the worker, the test, the
-kernel, the class of the object it belongs to and a hash of that object's ``layout`` (the
-engine's stages carry one), the front end's and the first launch's seconds. Processes the
+kernel, the class of the object it belongs to, a hash of that object's ``layout`` (the
+engine's stages carry one) and the layout's fields, the front end's and the first launch's
+seconds. Processes the
 tests start (the command line's tests) are not counted.
 
 Writes ``pytest.log`` (pytest's output, as it runs), ``suite_compile.json`` (the wall time,
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import hashlib
 import json
 import os
@@ -48,24 +50,27 @@ def install(folder: Path) -> None:
 
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{os.getpid()}.jsonl"
-    pending: dict[int, tuple[str, str, str, float]] = {}
+    pending: dict[int, tuple[str, str, str, float, dict]] = {}
     materialize, launch = kernel_impl.Kernel.materialize, kernel_impl.Kernel.launch_kernel
 
-    def owner(args) -> tuple[str, str]:
+    def owner(args) -> tuple[str, str, dict]:
         if not args:
-            return "", ""
+            return "", "", {}
         layout = getattr(args[0], "layout", None)
-        mark = hashlib.sha1(repr(layout).encode()).hexdigest()[:10] if layout is not None else ""
-        return type(args[0]).__name__, mark
+        if layout is None:
+            return type(args[0]).__name__, "", {}
+        mark = hashlib.sha1(repr(layout).encode()).hexdigest()[:10]
+        fields = dataclasses.asdict(layout) if dataclasses.is_dataclass(layout) else {}
+        return type(args[0]).__name__, mark, fields
 
     def timed_materialize(self, key=None, args=None, arg_features=None):
         new = key not in self.compiled_kernels
         start = time.perf_counter()
         out = materialize(self, key=key, args=args, arg_features=arg_features)
         if new:
-            cls, mark = owner(args)
+            cls, mark, fields = owner(args)
             front = time.perf_counter() - start
-            pending[id(self.compiled_kernels[key])] = (self.func.__name__, cls, mark, front)
+            pending[id(self.compiled_kernels[key])] = (self.func.__name__, cls, mark, front, fields)
         return out
 
     def timed_launch(self, t_kernel, *args):
@@ -82,6 +87,7 @@ def install(folder: Path) -> None:
             "layout": entry[2],
             "front_s": entry[3],
             "launch_s": time.perf_counter() - start,
+            "layout_fields": entry[4],
         }
         with open(path, "a") as f:
             f.write(json.dumps(row) + "\n")

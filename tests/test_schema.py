@@ -117,25 +117,24 @@ def test_docs_state_table_is_generated_from_the_schema():
 
 
 def test_traffic_model_counts_the_integrator_by_hand():
-    """The Euler step's integrator.advance moves, per body and f64: reads 10 scalars, 4
+    """The Euler step's integrator.advance moves, per body and f64: reads 12 scalars, 4
     vectors, the i64 force and torque, 6 energy terms and what the lists' staleness needs;
     writes back the same minus the model, plus the body's velocity change, rotation and
     path, the status and the stale flags."""
     batch = assemble(
         [load_scenario(ROOT / "scenarios" / "two_squares.toml")], Options(integrator="euler")
     )
-    layout = batch.layout.replace(
-        n_bodies=1000, n_worlds=1, n_probes=0, water=False, force_ext=True
-    )
+    layout = batch.layout.replace(n_bodies=1000, n_worlds=1, n_probes=0)
     n = layout.n_bodies
-    # reads: probe, kind (i32); force_ext (2 x f64); inv_mass, inv_inertia (f64); force_q
+    # reads: probe, kind (i32); force_ext (2 x f64); the water drag's two coefficients
+    # (f64, zero without [water]: read to know); inv_mass, inv_inertia (f64); force_q
     # (2 x i64), torque_q (i64); vel (2 x f64), omega, pos (2 x f64), angle (f64); energy
     # (6 x f64, codes.BodyEnergy); time_step (f64); for the neighbour lists small, world
     # (i32), radius (f64), the position and angle at the last build (3 x f64), the path
     # since (f64). No probes: probe_impulse moves nothing. Once: time_step, the world's
     # runaway distance and the lists' skin (f64 each), and the bodies in use (i32).
     lists = 4 + 4 + 8 + 16 + 8 + 8
-    body = 4 + 4 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 48 + lists
+    body = 4 + 4 + 16 + 16 + 8 + 8 + 16 + 8 + 16 + 8 + 16 + 8 + 48 + lists
     reads = n * body + 8 + 8 + 8 + 4
     # writes: force_q, torque_q, vel, omega, pos, angle, energy; the velocity changes that
     # the contacts book their work with (dvel 2 x f64, domega); the rotation (cos, sin);

@@ -217,8 +217,6 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
         hash_size=hash_size_for(sizes["n_small"]),
         coulomb=coulomb,
         rate_state=not coulomb,
-        water=first.water is not None,
-        force_ext=bool(np.any(np.asarray(arrays["body_force_ext"]) != 0.0)),
         theta_method=int(ThetaMethod.from_label(methods.pop()))
         if methods
         else int(ThetaMethod.EXPONENTIAL),
@@ -232,9 +230,6 @@ def assemble(scenes: Sequence, options: Options | None = None) -> Batch:
     layout = real.replace(**caps, hash_size=hash_size_for(caps["n_small"]))
     if not layout.crushing:
         arrays.pop("world_crushing_force")
-    if not layout.water:
-        arrays.pop("body_drag_linear")
-        arrays.pop("body_drag_rotational")
     if not layout.wind:
         arrays.pop("body_drag_air")
     host = HostArrays(real, arrays)

@@ -218,9 +218,7 @@ class Integrator(Stage):
         kind = m.body_kind[i]
         if kind == BodyKind.DYNAMIC:
             v0, w0 = d.body_vel[i], d.body_omega[i]
-            f_ext = ti.Vector([0.0, 0.0], self.layout.real)
-            if ti.static(self.layout.force_ext):
-                f_ext = m.body_force_ext[i]
+            f_ext = m.body_force_ext[i]  # zero for most bodies: the same bits as none
             f_drag = ti.Vector([0.0, 0.0], self.layout.real)
             t_drag = ti.cast(0.0, self.layout.real)
             # Euler: at the step's start; analytic: at the middle of the step the other
@@ -233,13 +231,12 @@ class Integrator(Stage):
             u_w = ti.Vector([0.0, 0.0], self.layout.real)
             if ti.static(self.layout.current):
                 u_w = self.forcing.current(i)
-            if ti.static(self.layout.water):
+            c_lin, c_rot = m.body_drag_linear[i], m.body_drag_rotational[i]
+            if c_lin != 0.0 or c_rot != 0.0:  # in [water]: a value, not a compiled switch
                 vr = vd
                 if ti.static(self.layout.current):
                     vr = vd - u_w
-                f_drag, t_drag = water_drag_ti(
-                    vr, wd, m.body_drag_linear[i], m.body_drag_rotational[i]
-                )
+                f_drag, t_drag = water_drag_ti(vr, wd, c_lin, c_rot)
             f_all = f + f_ext + f_drag
             f_air = ti.Vector([0.0, 0.0], self.layout.real)
             if ti.static(self.layout.wind):
@@ -279,9 +276,8 @@ class Integrator(Stage):
                 d.body_energy[i, BodyEnergy.DRAG] = e_d + ti.cast(
                     -(f_drag.dot(vr) + t_drag * wm) * dt, ti.f64
                 )
-                if ti.static(self.layout.force_ext):
-                    e_w = d.body_energy[i, BodyEnergy.WORK]
-                    d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
+                e_w = d.body_energy[i, BodyEnergy.WORK]
+                d.body_energy[i, BodyEnergy.WORK] = e_w + ti.cast(f_ext.dot(vm) * dt, ti.f64)
                 if ti.static(self.layout.current):
                     e_c = d.body_energy[i, BodyEnergy.CURRENT]
                     d.body_energy[i, BodyEnergy.CURRENT] = e_c + ti.cast(

@@ -68,7 +68,7 @@ class ReferenceModel:
         kind: ``(N,)`` ``codes.BodyKind``. world: ``(N,)`` world index.
         mass: ``(N,)`` kg. inertia: ``(N,)`` kg m^2. vertices: N outlines ``(n, 2)``
             relative to the centroid, unrotated (m). force_ext: ``(N, 2)`` N.
-        drag: ``(N, 2)`` water drag coefficients (kg/m, kg m^2), or None with no water.
+        drag: ``(N, 2)`` water drag coefficients (kg/m, kg m^2), zeros without [water].
         laws: the friction of each world, rebuilt from its model columns: a Coulomb mu
             (float) when every world is Coulomb, else a world's rate-and-state columns.
         k_e (N/m^2), k_v (Pa s): normal contact parameters, ``(W,)`` one per world. ratio:
@@ -94,7 +94,7 @@ class ReferenceModel:
     inertia: np.ndarray
     vertices: tuple[np.ndarray, ...]
     force_ext: np.ndarray
-    drag: np.ndarray | None
+    drag: np.ndarray
     laws: tuple
     k_e: np.ndarray
     k_v: np.ndarray
@@ -188,10 +188,8 @@ class ReferenceModel:
             mass=host.body_mass,
             inertia=host.body_inertia,
             vertices=tuple(host.vert_local[a : a + n] for a, n in zip(start, count)),
-            force_ext=host.body_force_ext if layout.force_ext else np.zeros((layout.n_bodies, 2)),
-            drag=np.stack([host.body_drag_linear, host.body_drag_rotational], axis=1)
-            if layout.water
-            else None,
+            force_ext=host.body_force_ext,
+            drag=np.stack([host.body_drag_linear, host.body_drag_rotational], axis=1),
             laws=laws,
             k_e=host.world_contact_stiffness,
             k_v=host.world_contact_viscosity,
@@ -415,7 +413,7 @@ def reference_step(state: ReferenceState, model: ReferenceModel, dt: float) -> R
                 vd = v0 + 0.5 * dt * (1.0 / model.mass[i]) * (f + f_ext)
                 wd = w0 + 0.5 * dt * (1.0 / model.inertia[i]) * tau
             u_w = model.current_at(i, state.pos[i], state.time)
-            if model.drag is not None:
+            if np.any(model.drag[i] != 0.0):  # a body in [water] (the kernel's test too)
                 fd, td = water_drag(
                     (vd - u_w)[None, :], np.array([wd]), model.drag[i, 0:1], model.drag[i, 1:2]
                 )

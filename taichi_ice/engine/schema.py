@@ -85,7 +85,7 @@ class Var:
             and bookkeeping, read rarely) or ``"diagnostic"`` (kept only for output: energy
             terms, overlap areas).
         when: a ``Layout`` switch that must be true for the field to exist (``"rate_state"``,
-            ``"water"``); otherwise a placeholder of one element keeps kernels uniform.
+            ``"wind"``); otherwise a placeholder of one element keeps kernels uniform.
         init: ``HOST`` (built by ``assemble``, copied in by ``World._start``) or a fill value.
     """
 
@@ -204,9 +204,9 @@ MODEL: tuple[Var, ...] = (
     Var("body_radius", "real", ("n_bodies",), "m", "circumradius about the centroid", init=HOST),
     Var("body_local_start", "i32", ("n_bodies",), "id", "first vertex of the body's unturned outline in vert_local (shared by bodies of one shape)", init=HOST),
     Var("body_vert_count", "i32", ("n_bodies",), "", "vertices of the body (<= max_verts)", init=HOST),
-    Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, when="force_ext", init=HOST),
-    Var("body_drag_linear", "real", ("n_bodies",), "kg/m", "quadratic water drag on translation", when="water", init=HOST),
-    Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation", when="water", init=HOST),
+    Var("body_force_ext", "real", ("n_bodies",), "N", "constant external force on a dynamic body", lanes=2, init=HOST),
+    Var("body_drag_linear", "real", ("n_bodies",), "kg/m", "quadratic water drag on translation (0: no [water])", init=HOST),
+    Var("body_drag_rotational", "real", ("n_bodies",), "kg m^2", "quadratic water drag on rotation (0: no [water])", init=HOST),
     # The forcing (physics.forcing): uniform per world, or sampled from the batch's grids.
     Var("body_drag_air", "real", ("n_bodies",), "kg/m", "quadratic wind drag rho_a C_a S ([wind])", when="wind", init=HOST),
     Var("world_current", "real", ("n_worlds",), "m/s", "uniform ocean current ([water] current)", lanes=2, when="current_uniform", init=HOST),
@@ -330,7 +330,11 @@ class Layout:
     ``time_step``, so a scene of another stiffness or floe size, or a run at another dt,
     takes the kernels compiled for the first of its kind. Nor are the scenes' counts: the
     sizes are capacities (``assemble.capacity``), and the bodies in use are ``body_count``,
-    so a scene of 5 bodies and one of 8 share kernels too.
+    so a scene of 5 bodies and one of 8 share kernels too. Nor are the water's drag and the
+    bodies' constant forces: a body without them has zero coefficients (``body_drag_linear``,
+    ``body_drag_rotational``) and a zero ``body_force_ext``, so a scene with water or a
+    pushed body takes the kernels of one without (2026-12-03: the suite's workers compiled
+    the step for 39 layouts before, 26 since; the forces add exact zeros: the same bits).
 
     Attributes:
         n_bodies, n_local_verts, n_worlds, n_probes, n_small, n_large, slots, hash_size:
@@ -340,9 +344,6 @@ class Layout:
         coulomb, rate_state: the batch's friction: every world Coulomb (``world_mu``), or
             rate-and-state columns for every world (``friction.contact_row``: the
             rate-and-state laws, and Coulomb worlds as A = B = 0).
-        water: water drag is compiled in.
-        force_ext: some body has a constant external force (``body_force_ext``); without
-            one the field is not allocated (16 B a body at f64) and the step adds none.
         theta_method: ``codes.ThetaMethod`` of the state variable (one per batch).
         crushing: the ice's strength caps the normal force (``[ice] crushing_strength``; its
             value per world is ``world_crushing_force``).
@@ -374,12 +375,10 @@ class Layout:
     max_verts: int
     coulomb: bool
     rate_state: bool
-    water: bool
     theta_method: int
     crushing: bool
     precision: str = "f64"
     energy: bool = True
-    force_ext: bool = True
     nbr_len: int = 1
     integrator: str = "euler"
     current: bool = False

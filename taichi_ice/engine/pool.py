@@ -23,6 +23,7 @@ or the command line (they lease from it). Which scenes make a batch is the calle
 from __future__ import annotations
 
 import contextlib
+import gc
 import sys
 import threading
 import weakref
@@ -132,6 +133,7 @@ class WorldPool:
             )
 
         refused: list[_Entry] = []  # of another layout (sizes the checks above do not see)
+        collected = False
         while True:
             with self._lock:
                 self._entries = [e for e in self._entries if e.generation == generation]
@@ -139,9 +141,18 @@ class WorldPool:
                     (e for e in self._entries if e not in refused and fits(e) and e.free()),
                     None,
                 )
-                if entry is None:
-                    break
-                entry.leased, entry.owner = True, None  # ours while it reloads
+                if entry is not None:
+                    entry.leased, entry.owner = True, None  # ours while it reloads
+                else:
+                    held = any(e not in refused and fits(e) and not e.leased for e in self._entries)
+            if entry is None:
+                if held and not collected:
+                    # A World held only by a reference cycle (a failed run's traceback holds
+                    # its Simulation) is idle once Python's collector runs: before compiling.
+                    gc.collect()
+                    collected = True
+                    continue
+                break
             try:
                 entry.world.reload(scenes, dt=options.dt, force_dt=options.force_dt)
                 batch = entry.world.batch

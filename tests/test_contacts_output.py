@@ -21,6 +21,7 @@ the floor), with rate-and-state interfaces under that law.
 from __future__ import annotations
 
 import copy
+import types
 import xml.etree.ElementTree as ET
 
 import h5py
@@ -145,7 +146,9 @@ RUNS["coulomb-euler"] = ("coulomb", "euler")
 def ran(request, tmp_path_factory):
     """A run with contacts, and after it the engine's step from its last frame, split at its
     stages: what the contact kernel gathered on each body, then the probes' impulses and
-    the contact slots the whole step left."""
+    the contact slots the whole step left. Of the Simulation it keeps what the tests read
+    (its dt, series_every and options), not the Simulation: its World goes back to the
+    pool for the tests' own runs of this layout, which compile nothing then."""
     law, integrator = RUNS[request.param]
     path = tmp_path_factory.mktemp("contacts") / f"{request.param}.h5"
     sim = Simulation(jam(law), contacts=True, integrator=integrator)
@@ -171,7 +174,9 @@ def ran(request, tmp_path_factory):
         for i in range(n)
         for s in range(counts[i])
     }
-    return law, sim, path, read_run(path), engine
+    kept = types.SimpleNamespace(dt=sim.dt, series_every=sim.series_every, options=sim.options)
+    del sim, world, d
+    return law, kept, path, read_run(path), engine
 
 
 def test_rows_are_the_forces_the_engine_applies_in_the_step_from_the_frame(ran, f64):

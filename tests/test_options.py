@@ -95,23 +95,63 @@ def _fields(world) -> dict:
     return world.transfer.read()
 
 
-def _step_alike(reused, new, steps: int) -> dict:
-    """Step a World on reused fields and one on new fields alike; they end field for field
-    the same (the reused one's fields are returned)."""
-    for world in (reused, new):
-        world.advance(steps)
-        world.check()
-    got, expected = _fields(reused), _fields(new)
+def _stepped(world, steps: int) -> dict:
+    """``world``'s fields after ``steps`` steps (checked)."""
+    world.advance(steps)
+    world.check()
+    return _fields(world)
+
+
+def _same(got: dict, expected: dict) -> dict:
+    """``got`` is, field for field, ``expected`` (and is returned)."""
     for name in expected:
         assert np.array_equal(got[name], expected[name]), name
     return got
+
+
+def test_water_and_a_constant_force_are_values_not_another_layout():
+    """Water drag and a body's constant force are data (zero coefficients, a zero force for
+    a body without them): two squares with water and a push share the layout of the dry,
+    unpushed pair, and a World reloaded with them after a dry run steps, field for field, as
+    it did when it was built for them; the drag and the push act (the floes end elsewhere
+    than dry), and a dry run on it after them is the dry run again."""
+    import copy
+
+    from taichi_ice.codes import BodyEnergy
+    from taichi_ice.engine.assemble import assemble
+    from taichi_ice.engine.world import World
+    from taichi_ice.scene.parse import scene_from_dict
+
+    dry = load_scenario("two_squares")
+    raw = copy.deepcopy(dry.raw)
+    raw["water"] = {}
+    raw["body"][0]["force"] = [40.0, 5.0]  # N
+    wet = scene_from_dict(raw, source=dry.source)
+    assert wet.water is not None and assemble([wet]).layout == assemble([dry]).layout
+
+    world = World([wet], dt=dry.dt)
+    expected = _stepped(world, 3000)
+    world.reload([dry], dt=dry.dt)
+    dry_run = _stepped(world, 3000)
+    assert not np.array_equal(dry_run["body_pos"], expected["body_pos"])
+    # The drag dissipated and the push worked on the wet run only (the budget's columns).
+    wet_e, dry_e = expected["body_energy"][:2], dry_run["body_energy"][:2]
+    assert np.all(wet_e[:, BodyEnergy.DRAG] > 0.0) and wet_e[0, BodyEnergy.WORK] != 0.0
+    assert not np.any(dry_e[:, [BodyEnergy.DRAG, BodyEnergy.WORK]])
+    world.reload([wet], dt=dry.dt)
+    _same(_stepped(world, 3000), expected)
+    world.reload([dry], dt=dry.dt)
+    _same(_stepped(world, 3000), dry_run)
 
 
 def test_a_world_reloaded_at_another_dt_steps_as_one_built_for_it():
     """The layout a World compiles for holds no dt (the runaway bound is a distance per step,
     compared with |v| dt at run time): the same scenes assembled at dt and dt / 3 give equal
     layouts, and a World reloaded at dt / 3 holds, 400 steps later, exactly the fields of a
-    World built at dt / 3, with a rate-and-state contact sliding (its memory integrates dt)."""
+    World built at dt / 3, with a rate-and-state contact sliding (its memory integrates dt).
+
+    One World, so one compile: its first 400 steps, on new fields built at dt / 3, are the
+    reference; a run at dt then leaves its fields full before the reload at dt / 3."""
     from taichi_ice.engine.assemble import assemble
     from taichi_ice.engine.world import World
 
@@ -119,22 +159,24 @@ def test_a_world_reloaded_at_another_dt_steps_as_one_built_for_it():
     small = scene.dt / 3
     assert assemble([scene]).layout == assemble([scene], Options(dt=small)).layout
 
-    reused = World([scene])
-    reused.advance(50)
-    reused.reload([scene], dt=small)
-    assert reused.dt == small and reused.options.dt == small
-    fresh = World([scene], dt=small)
-    for world in (reused, fresh):
-        world.advance(400)
-        world.check()
-    assert reused.contact_counts().tolist() == [1]
-    got, expected = _fields(reused), _fields(fresh)
+    world = World([scene], dt=small)
+    world.advance(400)
+    world.check()
+    expected = _fields(world)
+    world.reload([scene])
+    assert world.dt == scene.dt
+    world.advance(400)
+    coarse = world.positions()
+    world.reload([scene], dt=small)
+    assert world.dt == small and world.options.dt == small
+    world.advance(400)
+    world.check()
+    assert world.contact_counts().tolist() == [1]
+    got = _fields(world)
     for name in expected:
         assert np.array_equal(got[name], expected[name]), name
     # And the step at dt / 3 is not the step at dt: the reload took the new dt.
-    coarse = World([scene])
-    coarse.advance(400)
-    assert not np.array_equal(coarse.positions(), fresh.positions())
+    assert not np.array_equal(coarse, world.positions())
 
 
 @pytest.fixture
@@ -149,35 +191,41 @@ def pool(monkeypatch):
 
 def test_a_simulation_reuses_a_world_no_one_holds_and_steps_as_a_new_one(pool):
     """A Simulation takes its World from the process's pool: once the first Simulation is
-    gone its World is reloaded for the next scenes of that layout (built once, reloaded
-    once), and the run is, field for field, that of a World built for it, here with the
-    analytic step and a rate-and-state contact (contact memory, the remembered contact
-    force) after another run left the World's fields full."""
-    from taichi_ice.engine.world import World
+    gone its World is reloaded for the next scenes of that layout (built once, then
+    reloaded), and the run is, field for field, that of the World when it was built for it,
+    here with the analytic step and a rate-and-state contact (contact memory, the
+    remembered contact force) after another run left the World's fields full."""
     from taichi_ice.experiments.validation import dem_scenes
     from taichi_ice.run.simulation import Simulation
 
-    # The face-on collision first (the same layout: the law's kind is compiled in).
+    scene = dem_scenes.collision(dem_scenes.OFFSET, "rate-state")
+    # The reference first, on the new fields of the pool's one World (one compile).
+    fresh = Simulation(scene, integrator="analytic")
+    expected = {}
+    for until in (0.002, 0.01):  # in the contact (touching at t = 0, 4.9 ms), and after
+        fresh.run(until=until)
+        expected[until] = _fields(fresh.world)
+    del fresh
+    assert (pool.built, pool.reloaded, pool.idle()) == (1, 0, 1)
+    # The face-on collision (the same layout: the law's kind is compiled in) fills it.
     sim = Simulation(dem_scenes.collision(0.0, "rate-state"), integrator="analytic")
+    assert (pool.built, pool.reloaded) == (1, 1)
     sim.run(until=0.01)
     first = sim.world
     del sim
     assert pool.idle() == 0  # still held, by `first`
     del first
-    assert (pool.built, pool.reloaded, pool.idle()) == (1, 0, 1)
+    assert (pool.built, pool.reloaded, pool.idle()) == (1, 1, 1)
 
-    scene = dem_scenes.collision(dem_scenes.OFFSET, "rate-state")
     reused = Simulation(scene, integrator="analytic")
-    assert (pool.built, pool.reloaded) == (1, 1)
+    assert (pool.built, pool.reloaded) == (1, 2)
     # Its kernels ran: a run on it compiles nothing, and its progress bar says so.
     assert reused.world.compiled("sampled")
-    fresh = Simulation(scene, integrator="analytic", worlds=World)
-    for until in (0.002, 0.01):  # in the contact (touching at t = 0, 4.9 ms), and after
-        for s in (reused, fresh):
-            s.run(until=until)
-        got, expected = _fields(reused.world), _fields(fresh.world)
-        for name in expected:
-            assert np.array_equal(got[name], expected[name]), (until, name)
+    for until in (0.002, 0.01):
+        reused.run(until=until)
+        got = _fields(reused.world)
+        for name in expected[until]:
+            assert np.array_equal(got[name], expected[until][name]), (until, name)
         if until < 0.005:
             assert np.any(got["contact_force"] != 0.0)  # the contact was met
 
@@ -203,10 +251,9 @@ def _with_squares(scene, n: int):
 def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
     """The sizes a World compiles for are capacities (``assemble.capacity``: 256 bodies at
     least): two squares, then the same scene with three more, run on one World (built once,
-    reloaded once), and the second run is, field for field (the unused rows too), that of a
-    World built for it; 260 more (262 bodies) need another layout."""
+    reloaded), and the second run of five is, field for field (the unused rows too), that of
+    the World when it was built for five; 260 more (262 bodies) need another layout."""
     from taichi_ice.engine.assemble import assemble
-    from taichi_ice.engine.world import World
     from taichi_ice.run.simulation import Simulation
 
     base = load_scenario("two_squares")
@@ -214,27 +261,31 @@ def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
     assert assemble([five]).layout == assemble([base]).layout
     assert assemble([_with_squares(base, 10)]).layout == assemble([base]).layout
     assert assemble([_with_squares(base, 260)]).layout.n_bodies == 512
+    fresh = Simulation(five)  # the reference, on the pool's one World as built (one compile)
+    expected = {}
+    for until in (0.25, 1.0):  # in the pair's collision, and after
+        fresh.run(until=until)
+        expected[until] = _fields(fresh.world)
+    del fresh
     first = Simulation(base)
     first.run(until=0.3)  # past the collision: the fields hold a contact's leftovers
     del first
     reused = Simulation(five)
-    assert (pool.built, pool.reloaded) == (1, 1)
-    fresh = Simulation(five, worlds=World)
-    for until in (0.25, 1.0):  # in the pair's collision, and after
-        for sim in (reused, fresh):
-            sim.run(until=until)
-        got, expected = _fields(reused.world), _fields(fresh.world)
-        for name in expected:
-            assert np.array_equal(got[name], expected[name]), (until, name)
+    assert (pool.built, pool.reloaded) == (1, 2)
+    for until in (0.25, 1.0):
+        reused.run(until=until)
+        got = _fields(reused.world)
+        for name in expected[until]:
+            assert np.array_equal(got[name], expected[until][name]), (until, name)
     assert len(reused.positions(0)) == 5
     assert reused.positions(0)[2:, 1].tolist() == pytest.approx([2.5, 5.5, 8.5])
 
 
 def test_a_world_on_the_fields_of_one_gone_steps_as_one_on_new_fields(monkeypatch):
     """A World that is collected gives its fields and compiled stages to the next World of
-    its layout (``engines.Engines``): that World runs, field for field, as one built on new
-    fields at the same time (the first is still held then), here the rate-and-state sliding
-    block after a run of it with other coefficients left its fields full."""
+    its layout (``engines.Engines``): that World runs, field for field, as the first World
+    did on new fields, here the rate-and-state sliding block after a run of it with other
+    coefficients left its fields full (one set of fields, so one compile)."""
     from taichi_ice.engine import world as world_module
     from taichi_ice.engine.world import World
     from taichi_ice.physics.friction import RateState
@@ -243,19 +294,44 @@ def test_a_world_on_the_fields_of_one_gone_steps_as_one_on_new_fields(monkeypatc
     monkeypatch.setattr(world_module, "ENGINES", engines)
     block = load_scenario("sliding_block").with_friction(RateState())
     other = load_scenario("sliding_block").with_friction(RateState(A=0.02, B=0.03, t_c=1.0))
+    new = World([block], stepping="worlds")
+    assert engines.built == 1
+    expected = _stepped(new, 3000)
+    data = new.data
+    del new
     used = World([other], stepping="worlds")
+    assert used.data is data and (engines.built, engines.reused) == (1, 1)
     used.advance(4000)
     used.check()
-    data = used.data
     del used
     assert engines.idle() == 1
     again = World([block], stepping="worlds")
-    assert again.data is data and (engines.built, engines.reused) == (1, 1)
-    new = World([block], stepping="worlds")  # `again` holds the idle fields: new ones
-    assert new.data is not data and engines.built == 2
-    got = _step_alike(again, new, 3000)
+    assert again.data is data and (engines.built, engines.reused) == (1, 2)
+    got = _same(_stepped(again, 3000), expected)
     theta = got["contact_theta"][got["contact_partner"] >= 0]
     assert theta.size and np.all(theta != 0.0)  # rate-and-state memory was compared
+
+
+def test_a_simulation_gone_in_a_reference_cycle_leaves_its_world_to_the_next(pool):
+    """A Simulation unreachable but in a reference cycle (as a failed run's traceback holds
+    one) is freed only by Python's collector; the pool runs it before building, so the next
+    Simulation of the layout is handed that World, even with automatic collection off."""
+    import gc
+
+    from taichi_ice.run.simulation import Simulation
+
+    scene = load_scenario("two_squares")
+    gc.disable()
+    try:
+        first = Simulation(scene)
+        first.me = first  # a cycle: only the collector frees it
+        del first
+        assert pool.idle() == 0  # not freed yet
+        second = Simulation(scene)
+    finally:
+        gc.enable()
+    assert (pool.built, pool.reloaded) == (1, 1)
+    del second
 
 
 def test_a_world_still_held_is_never_handed_out(pool):
@@ -330,7 +406,7 @@ def test_a_world_built_after_a_simulation_takes_the_kernels_of_its_idle_world(po
     assert (engines.built, engines.reused, len(pool)) == (built, reused + 1, 0)
     new = World([scene], options)  # `again` holds those fields: new ones
     assert new.data is not data and engines.built == built + 1
-    _step_alike(again, new, 3000)
+    _same(_stepped(again, 3000), _stepped(new, 3000))
 
 
 def test_a_world_gone_in_a_reference_cycle_still_gives_its_kernels_to_the_next(monkeypatch):

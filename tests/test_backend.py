@@ -8,7 +8,8 @@ This holds the three against each other bit for bit, in fresh processes (Taichi'
 are per process), on both ways of stepping: a world a thread (the pillar scene with
 rate-and-state friction through its jam, with the default step and the coupled one) and
 bodies in parallel (a box of 300 diamonds at random angles and velocities), the latter both
-by a team of threads in one launch and by a kernel per stage and step. The "full" process
+by a team of threads in one launch (of two threads, and in the "on" process of one too) and
+by a kernel per stage and step. The "full" process
 leaves out the coupled step, whose kernels take that setting ~2 minutes to compile on 2
 cores (the same bits were checked here with it while "full" was the default).
 """
@@ -69,6 +70,15 @@ k.team = None  # the parallel step's kernels launched every step, as on a GPU
 k.advance(300)
 k.check()
 print("KERNELS", digest(k))
+if "team1" in parts:
+    # A team of one thread (TI_CPU_MAX_NUM_THREADS=1, or a one-core machine): its barriers
+    # once hung in the first step where Taichi's advanced passes run (stepper.BodyTeam.launch).
+    backend.cpu_threads = lambda: 1
+    t = World([scene], stepping="bodies")
+    assert t.team.threads == 1
+    t.advance(300)
+    t.check()
+    print("TEAM1", digest(t))
 """
 
 
@@ -92,7 +102,7 @@ def _result(proc: subprocess.Popen) -> dict[str, str]:
 
 def test_optimised_and_fast_compiled_kernels_step_the_same():
     # The processes side by side: compiling is most of their time.
-    procs = _start("0", "coupled"), _start("1", "coupled"), _start("full")
+    procs = _start("0", "coupled"), _start("1", "coupled", "team1"), _start("full")
     fast, on, full = (_result(p) for p in procs)
     assert fast["ADVANCED"] == "False True 1"
     assert on["ADVANCED"] == "True False 0" and full["ADVANCED"] == "True True 1"
@@ -106,6 +116,8 @@ def test_optimised_and_fast_compiled_kernels_step_the_same():
     # The team's threads meet at barriers inside one launch (stepper.BodyTeam): compiled
     # with every pass, they still see each other's stores as the kernels per stage do.
     assert on["BOX"].split()[0] == on["KERNELS"] == fast["KERNELS"] == full["KERNELS"]
+    # And so does a team of one, which has no one to wait for.
+    assert on["TEAM1"] == on["KERNELS"]
 
 
 @pytest.mark.parametrize(

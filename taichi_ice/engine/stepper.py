@@ -336,6 +336,34 @@ class BodyTeam(Stage):
         self.arrived = ti.field(ti.i32, ())
         self.claimed = ti.field(ti.i32, 3)
         self.done = ti.field(ti.i32, ())
+        self._compiled = False
+
+    def launch(self, n: int) -> int:
+        """``run(n)``: the steps taken. Its first call compiles it without Taichi's
+        ``cache_loop_invariant_global_vars`` pass (an advanced pass, on in the "on" and
+        "full" settings), and puts the setting back for the kernels compiled after.
+
+        That pass keeps a global that a loop only reads and adds to in a register for the
+        loop's length, written back at its end: right for one thread, wrong for a barrier,
+        whose spin reads must see the other threads' arrivals. Taichi 1.7.4 applied it to
+        the barriers of a team of one thread (a loop over a range of one) and, with every
+        pass ("full"), to the midstep team's of two: each thread then waited for ever, in
+        the first step (found 2026-12-03: ``TI_CPU_MAX_NUM_THREADS=1``, or a one-core
+        machine, stepping a world of 1e4 blocks, hung). Taichi's offline cache does not key
+        kernels by this setting; every process compiles this kernel without it."""
+        if self._compiled:
+            return self.run(n)
+        from taichi.lang import impl
+
+        cfg = impl.current_cfg()
+        kept = cfg.cache_loop_invariant_global_vars
+        cfg.cache_loop_invariant_global_vars = False
+        try:
+            steps = self.run(n)
+        finally:
+            cfg.cache_loop_invariant_global_vars = kept
+        self._compiled = True
+        return steps
 
     @ti.func
     def barrier(self, k):

@@ -314,7 +314,7 @@ class World:
             left = n
             while left > 0:
                 self.refresh_lists()
-                left -= self.team.run(min(left, self.team.MAX_STEPS))
+                left -= self.team.launch(min(left, self.team.MAX_STEPS))
         else:
             for _ in range(n):
                 self.refresh_lists()

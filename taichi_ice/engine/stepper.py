@@ -343,14 +343,17 @@ class BodyTeam(Stage):
         ``cache_loop_invariant_global_vars`` pass (an advanced pass, on in the "on" and
         "full" settings), and puts the setting back for the kernels compiled after.
 
-        That pass keeps a global that a loop only reads and adds to in a register for the
-        loop's length, written back at its end: right for one thread, wrong for a barrier,
-        whose spin reads must see the other threads' arrivals. Taichi 1.7.4 applied it to
-        the barriers of a team of one thread (a loop over a range of one) and, with every
-        pass ("full"), to the midstep team's of two: each thread then waited for ever, in
-        the first step (found 2026-12-03: ``TI_CPU_MAX_NUM_THREADS=1``, or a one-core
-        machine, stepping a world of 1e4 blocks, hung). Taichi's offline cache does not key
-        kernels by this setting; every process compiles this kernel without it."""
+        That pass keeps a global that a loop reads and adds to in a local copy for the
+        loop's length, written back at its end: right for a loop no other thread touches,
+        wrong for a barrier, whose spin reads must see every arrival. Taichi 1.7.4 applied
+        it to the barriers of a team of one thread (its loop runs over a range of one; the
+        arrival's add and the spin's read each got a copy of their own, so the read never
+        saw the add: the IR of a minimal kernel shows it) and, with every pass ("full"),
+        to the midstep team's of two: the team then waited for ever in its first step
+        (found 2026-12-03: ``TI_CPU_MAX_NUM_THREADS=1``, or a one-core machine, stepping a
+        world of 1e4 blocks). Taichi's offline cache does not key kernels by this setting:
+        a kernel of the same code cached by a run with the pass on may still be loaded (a
+        team of two in "on", which ran), but a run that hung never wrote one."""
         if self._compiled:
             return self.run(n)
         from taichi.lang import impl

@@ -102,10 +102,11 @@ def _stepped(world, steps: int) -> dict:
     return _fields(world)
 
 
-def _same(got: dict, expected: dict) -> dict:
-    """``got`` is, field for field, ``expected`` (and is returned)."""
+def _same(got: dict, expected: dict, *where) -> dict:
+    """``got`` is, field for field, ``expected`` (and is returned); a failure names
+    ``where`` and the field."""
     for name in expected:
-        assert np.array_equal(got[name], expected[name]), name
+        assert np.array_equal(got[name], expected[name]), (*where, name)
     return got
 
 
@@ -172,9 +173,7 @@ def test_a_world_reloaded_at_another_dt_steps_as_one_built_for_it():
     world.advance(400)
     world.check()
     assert world.contact_counts().tolist() == [1]
-    got = _fields(world)
-    for name in expected:
-        assert np.array_equal(got[name], expected[name]), name
+    _same(_fields(world), expected)
     # And the step at dt / 3 is not the step at dt: the reload took the new dt.
     assert not np.array_equal(coarse, world.positions())
 
@@ -223,9 +222,7 @@ def test_a_simulation_reuses_a_world_no_one_holds_and_steps_as_a_new_one(pool):
     assert reused.world.compiled("sampled")
     for until in (0.002, 0.01):
         reused.run(until=until)
-        got = _fields(reused.world)
-        for name in expected[until]:
-            assert np.array_equal(got[name], expected[until][name]), (until, name)
+        got = _same(_fields(reused.world), expected[until], until)
         if until < 0.005:
             assert np.any(got["contact_force"] != 0.0)  # the contact was met
 
@@ -274,9 +271,7 @@ def test_a_scene_of_other_counts_within_the_capacities_reuses_the_world(pool):
     assert (pool.built, pool.reloaded) == (1, 2)
     for until in (0.25, 1.0):
         reused.run(until=until)
-        got = _fields(reused.world)
-        for name in expected[until]:
-            assert np.array_equal(got[name], expected[until][name]), (until, name)
+        _same(_fields(reused.world), expected[until], until)
     assert len(reused.positions(0)) == 5
     assert reused.positions(0)[2:, 1].tolist() == pytest.approx([2.5, 5.5, 8.5])
 
